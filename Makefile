@@ -1,0 +1,41 @@
+# phiscene: `make run` builds the default benchmark tables, `make test` runs the test suite.
+# Both create the virtual environment (.venv) first if it is absent.
+
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.phiscene-installed
+JOBS ?= 2
+TARGET ?= results/tables/phys.csv
+
+.PHONY: run all test lint bench env clean
+
+run: $(STAMP)
+	$(BIN)/snakemake -j$(JOBS) $(TARGET)
+
+all: $(STAMP)
+	$(BIN)/snakemake -j$(JOBS)
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+lint: $(STAMP)
+	$(BIN)/snakemake --lint
+
+bench: $(STAMP)
+	$(BIN)/python benchmarks/default_run.py
+	$(BIN)/python benchmarks/method_speed.py
+
+env: $(STAMP)
+
+# torch is pinned (2.13.0): a CPU build lies on local disk, an unpinned torch pulls a multi-GB CUDA build.
+$(STAMP): pyproject.toml
+	tools/system-deps.sh
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q torch==2.13.0
+	$(BIN)/python -m pip install -q -e '.[test]'
+	touch $@
+
+clean:
+	rm -rf results .snakemake

@@ -1,0 +1,30 @@
+# phiscene: physically grounded image-to-3D scene reconstruction, as a Snakemake workflow.
+# Run `snakemake -j2 results/tables/phys.csv` (or `make run`); see README.md.
+
+import os
+
+from snakemake.utils import min_version, validate
+
+min_version("9.0")
+
+
+configfile: os.path.join(workflow.basedir, "config/config.yaml")
+
+
+validate(config, "config/schema.yaml")
+
+
+include: "workflow/rules/common.smk"
+include: "workflow/rules/benchmark.smk"
+include: "workflow/rules/proxies.smk"
+include: "workflow/rules/topology.smk"
+include: "workflow/rules/methods.smk"
+include: "workflow/rules/metrics.smk"
+include: "workflow/rules/tables.smk"
+
+
+rule all:
+    default_target: True
+    input:
+        "results/tables/phys.csv",
+        "results/tables/topology.csv",

@@ -1,0 +1,55 @@
+"""Atomic file writes: a failed job never leaves a half-written output.
+
+Every writer in phiscene goes through :func:`atomic_path`, which yields a
+temporary path in the destination folder and renames it over the target only
+when the block finishes without an exception.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Iterator
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path, suffix: str | None = None) -> Iterator[Path]:
+    """Yield a temporary path that is renamed to ``path`` on success.
+
+    Parameters
+    ----------
+    path
+        Final destination. Parent folders are created.
+    suffix
+        Suffix of the temporary file (defaults to the destination's, so
+        libraries that pick a format by extension still work).
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(
+        prefix=f".{path.name}.", suffix=suffix if suffix is not None else "".join(path.suffixes),
+        dir=path.parent,
+    )
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        os.replace(tmp_path, path)
+    finally:
+        if tmp_path.exists():
+            tmp_path.unlink()
+
+
+def write_text(path: str | Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+
+
+def write_json(path: str | Path, data: Any) -> None:
+    """Write ``data`` as indented JSON atomically (NaN is refused)."""
+    text = json.dumps(data, indent=1, allow_nan=False, sort_keys=False) + "\n"
+    write_text(path, text)

@@ -1,0 +1,32 @@
+"""Exception types with one-line, user-facing messages."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class PhisceneError(Exception):
+    """Base class of every error phiscene raises on purpose."""
+
+
+class InputError(PhisceneError, ValueError):
+    """Bad user input: names the file and the field that is wrong.
+
+    Parameters
+    ----------
+    path
+        The offending file (or ``None`` when there is no file).
+    field
+        Dotted path of the offending field, e.g. ``objects[2].pose``.
+    problem
+        What is wrong, in one line.
+    """
+
+    def __init__(self, path: str | Path | None, field: str | None, problem: str):
+        self.path = None if path is None else str(path)
+        self.field = field
+        self.problem = problem
+        where = self.path or "<input>"
+        if field:
+            where += f": {field}"
+        super().__init__(f"{where}: {problem}")

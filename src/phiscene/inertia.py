@@ -1,0 +1,78 @@
+"""Rigid-body mass properties of an object at a given uniform scale."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+from phiscene.errors import InputError
+from phiscene.tolerances import TOL
+
+
+@dataclass(frozen=True)
+class RigidProps:
+    """Mass properties in the object's scaled local frame.
+
+    Attributes
+    ----------
+    mass : float
+        kg.
+    com : (3,) float
+        Centre of mass, scaled local frame (m).
+    principal_moments : (3,) float
+        Principal moments of inertia about the COM (kg m^2).
+    principal_axes : (3, 3) float
+        Rotation whose columns are the principal axes in the local frame.
+    source : str
+        ``"mesh"`` (closed mesh) or ``"proxies"`` (union of convex hulls).
+    """
+
+    mass: float
+    com: np.ndarray
+    principal_moments: np.ndarray
+    principal_axes: np.ndarray
+    source: str
+
+
+def rigid_props(mesh: trimesh.Trimesh, hulls: list[np.ndarray] | None, density: float, scale: float = 1.0) -> RigidProps:
+    """Mass, centre of mass and inertia of an object.
+
+    A closed (watertight, positive-volume) mesh is integrated exactly; an open
+    or multi-shell one falls back to the union of its convex proxies.
+
+    Parameters
+    ----------
+    mesh
+        Local-frame mesh (unscaled).
+    hulls
+        Convex proxies, each ``(v, 3)`` local vertices (unscaled); used when the mesh is not closed.
+    density
+        kg/m^3.
+    scale
+        Uniform scale of the pose.
+    """
+    body = None
+    source = "mesh"
+    if mesh.is_volume and mesh.volume > TOL.min_volume:
+        body = mesh
+    elif hulls:
+        body = trimesh.util.concatenate([trimesh.convex.convex_hull(h) for h in hulls])
+        source = "proxies"
+    else:
+        body = mesh.convex_hull
+        source = "hull"
+    m = body.copy()
+    m.apply_scale(scale)
+    m.density = density
+    volume = float(m.volume)
+    if not np.isfinite(volume) or volume <= TOL.min_volume * scale**3:
+        raise InputError(None, None, f"object has no usable volume ({volume:.3g} m^3) for mass properties")
+    inertia = np.asarray(m.moment_inertia)
+    moments, axes = np.linalg.eigh(0.5 * (inertia + inertia.T))
+    if np.linalg.det(axes) < 0:
+        axes[:, 0] *= -1
+    moments = np.maximum(moments, 1e-12)
+    return RigidProps(mass=float(m.mass), com=np.asarray(m.center_mass, dtype=float), principal_moments=moments,
+                      principal_axes=axes, source=source)

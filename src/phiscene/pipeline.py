@@ -1,0 +1,90 @@
+"""File-level stage functions: path in, path out.
+
+Workflow scripts and the ``phiscene`` command call these; each loads its
+inputs (validating them), calls the computing function of its module and
+writes its outputs atomically.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Callable
+
+from phiscene.atomic import write_json
+from phiscene.proxies import ProxyParams, proxy_for_mesh, read_proxies, write_proxies
+from phiscene.scene import load_scene, save_scene
+from phiscene.sim.settings import SimSettings
+
+log = logging.getLogger(__name__)
+
+
+def run_proxies(scene_path: str | Path, out_path: str | Path, params: dict, cache_dir: str | Path) -> None:
+    """Convex proxies of every object of a scene -> one ``.npz`` keyed by object id."""
+    scene = load_scene(scene_path)
+    pp = ProxyParams.from_dict(params)
+    proxies = {}
+    for o in scene.objects:
+        px = proxies[o.id] = proxy_for_mesh(o.mesh_path, pp, cache_dir)
+        log.info("%s: %d hulls, volume ratio %.3f, max outside %.4f m, %.2f s", o.id, len(px.hulls),
+                 px.volume_ratio, px.max_outside, px.seconds)
+    write_proxies(out_path, proxies)
+
+
+def run_reference(scene_path: str | Path, out_path: str | Path) -> None:
+    """A reference method row (gt, initial): the scene itself, re-rooted at ``out_path``."""
+    save_scene(load_scene(scene_path), out_path)
+
+
+def run_topology(scene_path: str | Path, out_path: str | Path, backend: str, params: dict,
+                 given_path: str | Path | None = None) -> None:
+    """Support graph and placement order of a scene with the named backend."""
+    from phiscene import topology
+
+    scene = load_scene(scene_path)
+    graph = topology.infer(scene, backend, params, given_path=given_path)
+    graph.save(out_path)
+    log.info("%s: %d edges, order %s, dropped %d", backend, len(graph.edges), " ".join(graph.order),
+             len(graph.dropped_edges))
+
+
+def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: str | Path,
+               out_scene: str | Path, out_log: str | Path, assembly: dict, sim: dict, cache_dir: str | Path,
+               progress: Callable[[str], None] | None = None) -> None:
+    """phi-Scene grounding of one scene in its topology's order."""
+    from phiscene.assembly.assemble import AssemblyParams, ground_scene
+    from phiscene.topology.graph import SupportGraph
+
+    scene = load_scene(scene_path)
+    graph = SupportGraph.load(topology_path, scene=scene)
+    proxies = read_proxies(proxies_path)
+    settled, record = ground_scene(scene, graph.order, proxies, AssemblyParams.from_dict(assembly),
+                                   SimSettings.from_dict(sim), Path(cache_dir), progress=progress or log.info)
+    record["topology"] = str(topology_path)
+    write_json(out_log, record)
+    save_scene(settled, out_scene)
+
+
+def run_physical_metrics(scene_path: str | Path, proxies_path: str | Path, out_path: str | Path, params: dict,
+                         sim: dict, cache_dir: str | Path) -> None:
+    """Penetration, floating and post-simulation drift of one scene."""
+    from phiscene.metrics.physical import PhysicalParams, physical_metrics
+
+    scene = load_scene(scene_path)
+    result = physical_metrics(scene, read_proxies(proxies_path), PhysicalParams.from_dict(params),
+                              SimSettings.from_dict(sim), Path(cache_dir))
+    log.info("pen %.4f m, float %.4f m, drift %.4f m / %.2f deg", result["pen_depth"], result["float_dist"],
+             result["drift_trans"], result["drift_rot"])
+    write_json(out_path, result)
+
+
+def run_topology_metrics(predicted_path: str | Path, gt_path: str | Path, out_path: str | Path) -> None:
+    """Edge precision, recall and F1 of one predicted support graph."""
+    from phiscene.metrics.topology import edge_scores
+    from phiscene.topology.graph import SupportGraph
+
+    pred, gt = SupportGraph.load(predicted_path), SupportGraph.load(gt_path)
+    scores = edge_scores(pred.edge_pairs(), gt.edge_pairs())
+    write_json(out_path, scores)
+
+

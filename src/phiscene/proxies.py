@@ -1,0 +1,243 @@
+"""Collision proxies: convex decomposition of each mesh, cached by content.
+
+A proxy set is a list of convex hulls, each ``(v, 3)`` vertices in the
+object's unscaled local frame. Back ends: ``coacd`` (default, CoACD with
+decimation), ``vhacd`` (pybullet's V-HACD) and ``convex`` (one hull; fast,
+for tests and convex objects). Results are cached under
+``<cache_dir>/proxies/<mesh hash>-<params hash>.npz`` with atomic writes, so
+parallel jobs can share the cache; a cache entry whose stored hashes do not
+match is rebuilt.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from phiscene.atomic import atomic_path
+from phiscene.meshes import load_mesh, mesh_hash
+
+log = logging.getLogger(__name__)
+
+#: Bump when the decomposition code changes in a way that changes results.
+PROXY_VERSION = 1
+
+
+@dataclass(frozen=True)
+class ProxyParams:
+    """Convex decomposition parameters.
+
+    Attributes
+    ----------
+    backend
+        ``coacd``, ``vhacd`` or ``convex``.
+    threshold
+        CoACD concavity threshold (smaller = more, tighter hulls).
+    max_hulls
+        Cap on the number of hulls (-1 = no cap).
+    max_hull_vertices
+        Vertex cap per hull (CoACD decimation / V-HACD maxNumVerticesPerCH).
+    preprocess_resolution
+        CoACD manifold preprocessing voxel resolution.
+    resolution
+        CoACD sampling resolution / V-HACD voxel resolution.
+    mcts_iterations, mcts_nodes, mcts_max_depth
+        CoACD tree-search settings.
+    seed
+        Random seed of the decomposition.
+    """
+
+    backend: str = "coacd"
+    threshold: float = 0.08
+    max_hulls: int = 16
+    max_hull_vertices: int = 48
+    preprocess_resolution: int = 40
+    resolution: int = 1000
+    mcts_iterations: int = 60
+    mcts_nodes: int = 12
+    mcts_max_depth: int = 2
+    seed: int = 0
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> "ProxyParams":
+        d = dict(d or {})
+        known = set(cls.__dataclass_fields__)
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(f"unknown proxy parameters {unknown}; known: {sorted(known)}")
+        p = cls(**d)
+        if p.backend not in ("coacd", "vhacd", "convex"):
+            raise ValueError(f"proxy backend must be coacd, vhacd or convex, got {p.backend!r}")
+        return p
+
+    def digest(self) -> str:
+        text = json.dumps({**asdict(self), "version": PROXY_VERSION}, sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+@dataclass
+class Proxy:
+    """Convex proxies of one mesh with their fidelity.
+
+    Attributes
+    ----------
+    hulls
+        Each ``(v, 3)`` float vertices of one convex piece (unscaled local frame).
+    volume_ratio
+        Total hull volume / mesh volume (>= 1 for a covering decomposition; NaN for open meshes).
+    max_outside
+        Largest distance (m, unscaled) of a mesh surface sample outside every hull.
+    seconds
+        Decomposition wall time.
+    """
+
+    hulls: list[np.ndarray]
+    volume_ratio: float
+    max_outside: float
+    seconds: float = 0.0
+    meta: dict = field(default_factory=dict)
+
+
+def decompose(mesh: trimesh.Trimesh, params: ProxyParams) -> list[np.ndarray]:
+    """Convex decomposition of a local-frame mesh.
+
+    Returns
+    -------
+    hulls : list of (v, 3) float
+    """
+    if params.backend == "convex":
+        return [np.asarray(mesh.convex_hull.vertices, dtype=float)]
+    if params.backend == "coacd":
+        import coacd
+
+        coacd.set_log_level("error")
+        cm = coacd.Mesh(np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces, dtype=np.int64))
+        parts = coacd.run_coacd(
+            cm, threshold=params.threshold, max_convex_hull=params.max_hulls,
+            preprocess_resolution=params.preprocess_resolution, resolution=params.resolution,
+            mcts_nodes=params.mcts_nodes, mcts_iterations=params.mcts_iterations,
+            mcts_max_depth=params.mcts_max_depth, decimate=True, max_ch_vertex=params.max_hull_vertices,
+            seed=params.seed)
+        hulls = [np.asarray(v, dtype=float) for v, _ in parts if len(v) >= 4]
+    else:
+        hulls = _vhacd(mesh, params)
+    hulls = [h for h in hulls if _hull_ok(h)]
+    if not hulls:  # decomposition failed: one convex hull is always a valid proxy
+        log.warning("convex decomposition returned nothing usable; using the convex hull")
+        hulls = [np.asarray(mesh.convex_hull.vertices, dtype=float)]
+    return hulls
+
+
+def _hull_ok(v: np.ndarray) -> bool:
+    try:
+        return trimesh.convex.convex_hull(v).volume > 1e-12
+    except Exception:
+        return False
+
+
+def _vhacd(mesh: trimesh.Trimesh, params: ProxyParams) -> list[np.ndarray]:
+    import tempfile
+
+    import pybullet as p
+
+    with tempfile.TemporaryDirectory() as tmp:
+        src, dst, logf = Path(tmp, "in.obj"), Path(tmp, "out.obj"), Path(tmp, "log.txt")
+        mesh.export(src)
+        p.vhacd(str(src), str(dst), str(logf), resolution=max(params.resolution * 100, 10000),
+                maxNumVerticesPerCH=params.max_hull_vertices, concavity=params.threshold * 0.05)
+        scene = trimesh.load(dst, force="scene", process=False, split_object=True, group_material=False)
+        geoms = list(scene.geometry.values()) if isinstance(scene, trimesh.Scene) else [scene]
+        return [np.asarray(g.vertices, dtype=float) for g in geoms]
+
+
+def fidelity(mesh: trimesh.Trimesh, hulls: list[np.ndarray], samples: int = 2048, seed: int = 0) -> tuple[float, float]:
+    """Volume ratio and max outside distance of a proxy set (see :class:`Proxy`)."""
+    from phiscene.meshes import sample_surface
+
+    hull_meshes = [trimesh.convex.convex_hull(h) for h in hulls]
+    vol = sum(float(h.volume) for h in hull_meshes)
+    ratio = vol / float(mesh.volume) if mesh.is_volume and mesh.volume > 0 else float("nan")
+    pts = sample_surface(mesh, samples, seed)
+    outside = np.full(len(pts), np.inf)
+    for h in hull_meshes:
+        # signed distance to a convex hull from its face planes: max over planes (exact inside, lower bound outside)
+        normals = h.face_normals
+        offsets = np.einsum("ij,ij->i", normals, h.triangles[:, 0])
+        d = pts @ normals.T - offsets
+        outside = np.minimum(outside, np.maximum(d.max(axis=1), 0.0))
+    return ratio, float(outside.max())
+
+
+def proxy_for_mesh(mesh_file: str | Path, params: ProxyParams, cache_dir: str | Path) -> Proxy:
+    """Proxies of the mesh in ``mesh_file``, from the cache or computed and cached.
+
+    A cache entry is trusted only if its stored mesh hash and parameter hash
+    match; a corrupt or mismatched entry is recomputed.
+    """
+    import time
+
+    mesh = load_mesh(mesh_file)
+    mh, ph = mesh_hash(mesh), params.digest()
+    path = Path(cache_dir) / "proxies" / f"{mh}-{ph}.npz"
+    cached = _read_entry(path, mh, ph)
+    if cached is not None:
+        return cached
+    t0 = time.perf_counter()
+    hulls = decompose(mesh, params)
+    ratio, outside = fidelity(mesh, hulls)
+    proxy = Proxy(hulls=hulls, volume_ratio=ratio, max_outside=outside, seconds=time.perf_counter() - t0,
+                  meta={"mesh_hash": mh, "params_hash": ph})
+    write_proxies(path, {"_": proxy})
+    return proxy
+
+
+def _read_entry(path: Path, mh: str, ph: str) -> Proxy | None:
+    if not path.exists():
+        return None
+    try:
+        got = read_proxies(path)["_"]
+    except Exception as exc:
+        log.warning("proxy cache entry %s unreadable (%s); rebuilding", path, exc)
+        return None
+    if got.meta.get("mesh_hash") != mh or got.meta.get("params_hash") != ph:
+        log.warning("proxy cache entry %s does not match its key; rebuilding", path)
+        return None
+    return got
+
+
+def write_proxies(path: str | Path, proxies: dict[str, Proxy]) -> None:
+    """Write named proxy sets to one ``.npz`` atomically."""
+    arrays: dict[str, np.ndarray] = {}
+    index = {}
+    for name, px in proxies.items():
+        index[name] = {"n": len(px.hulls), "volume_ratio": px.volume_ratio, "max_outside": px.max_outside,
+                       "seconds": px.seconds, "meta": px.meta}
+        for k, h in enumerate(px.hulls):
+            arrays[f"{name}/{k}"] = np.asarray(h, dtype=np.float64)
+    arrays["__index__"] = np.frombuffer(json.dumps(index, allow_nan=True).encode(), dtype=np.uint8)
+    with atomic_path(path, suffix=".npz") as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+
+
+def read_proxies(path: str | Path) -> dict[str, Proxy]:
+    """Read the named proxy sets written by :func:`write_proxies`."""
+    with np.load(path, allow_pickle=False) as z:
+        index = json.loads(bytes(z["__index__"]).decode())
+        out = {}
+        for name, info in index.items():
+            hulls = [z[f"{name}/{k}"] for k in range(info["n"])]
+            out[name] = Proxy(hulls=hulls, volume_ratio=info["volume_ratio"], max_outside=info["max_outside"],
+                              seconds=info.get("seconds", 0.0), meta=info.get("meta", {}))
+    return out
+
+
+def scene_proxies(scene, params: ProxyParams, cache_dir: str | Path) -> dict[str, Proxy]:
+    """Proxies of every object of a :class:`~phiscene.scene.Scene`, keyed by object id."""
+    return {o.id: proxy_for_mesh(o.mesh_path, params, cache_dir) for o in scene.objects}

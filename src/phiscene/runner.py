@@ -1,0 +1,70 @@
+"""Job plumbing shared by workflow scripts and the CLI: logging, threads, one-line errors."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Iterator
+
+from phiscene.errors import PhisceneError
+
+log = logging.getLogger("phiscene")
+
+
+def set_threads(threads: int) -> None:
+    """Limit every thread pool (BLAS, OpenMP, torch, open3d) of this process to ``threads``.
+
+    Two parallel jobs whose pools each take every core slow each other down;
+    Snakemake's ``threads:`` is the budget of one job.
+    """
+    threads = max(1, int(threads))
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS"):
+        os.environ[var] = str(threads)
+    try:
+        import torch
+
+        torch.set_num_threads(threads)
+        with contextlib.suppress(RuntimeError):
+            torch.set_num_interop_threads(1)
+    except ImportError:  # torch is optional for stages that do not use it
+        pass
+
+
+def setup_logging(log_file: str | Path | None = None, level: int = logging.INFO) -> None:
+    """Log phiscene messages to stderr and, if given, to ``log_file`` (overwritten)."""
+    root = logging.getLogger()
+    root.handlers.clear()
+    fmt = logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s", "%H:%M:%S")
+    handlers: list[logging.Handler] = [logging.StreamHandler(sys.stderr)]
+    if log_file:
+        Path(log_file).parent.mkdir(parents=True, exist_ok=True)
+        handlers.append(logging.FileHandler(log_file, mode="w"))
+    for h in handlers:
+        h.setFormatter(fmt)
+        root.addHandler(h)
+    root.setLevel(level)
+
+
+@contextlib.contextmanager
+def job(name: str, log_file: str | Path | None = None, threads: int = 1) -> Iterator[logging.Logger]:
+    """Run one workflow job: set up logging and threads, time it, turn phiscene errors into one line.
+
+    A :class:`~phiscene.errors.PhisceneError` is logged as a single line and the
+    process exits with status 1 (no traceback from inside a library); any
+    other exception propagates with its traceback, since it is a bug.
+    """
+    setup_logging(log_file)
+    set_threads(threads)
+    t0 = time.perf_counter()
+    log.info("%s: start (threads=%d)", name, threads)
+    try:
+        yield log
+    except PhisceneError as exc:
+        log.error("%s: %s", name, exc)
+        logging.shutdown()
+        raise SystemExit(1) from None
+    log.info("%s: done in %.2f s", name, time.perf_counter() - t0)

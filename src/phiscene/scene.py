@@ -1,0 +1,213 @@
+"""The scene data model and its ``scene.json`` file format (DESIGN §3).
+
+A :class:`Scene` is a list of :class:`SceneObject` (mesh in its local frame +
+pose into the world) above a horizontal ground plane; z is up, units are
+metres. Paths in the file are relative to the file. Loading validates the
+schema, every pose, the id set and every mesh, and names the file and field
+of the first problem.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from phiscene import schemas
+from phiscene.atomic import write_json
+from phiscene.errors import InputError
+from phiscene.tolerances import TOL
+from phiscene.transforms import rigidity_error, transform_points
+
+FORMAT = "phiscene.scene/1"
+
+
+@dataclass
+class SceneObject:
+    """One object of a scene.
+
+    Attributes
+    ----------
+    id
+        Unique name (``ground`` is reserved).
+    mesh_path
+        Absolute path of the mesh file, geometry in the object's local frame.
+    pose : (4, 4) float
+        Local-to-world similarity transform.
+    description
+        Free text (used by the MLLM backend and reports).
+    color
+        RGB colour of the object in the instance segmentation, or ``None``.
+    meta
+        Free-form extra data carried through unchanged.
+    """
+
+    id: str
+    mesh_path: Path
+    pose: np.ndarray
+    description: str = ""
+    color: tuple[int, int, int] | None = None
+    meta: dict = field(default_factory=dict)
+
+    def mesh(self):
+        """The local-frame mesh, loaded once per path (see :func:`phiscene.meshes.load_mesh`)."""
+        from phiscene.meshes import load_mesh
+
+        return load_mesh(self.mesh_path)
+
+    def world_mesh(self):
+        """A copy of the mesh transformed into the world frame."""
+        m = self.mesh().copy()
+        m.apply_transform(self.pose)
+        return m
+
+    def world_points(self, points_local: np.ndarray) -> np.ndarray:
+        """Map local points (n, 3) to world points (n, 3)."""
+        return transform_points(self.pose, points_local)
+
+
+@dataclass
+class Scene:
+    """A set of objects above a ground plane.
+
+    Attributes
+    ----------
+    objects
+        The objects, in file order.
+    ground_height
+        Height (z) of the ground plane in metres.
+    camera
+        Absolute path of the reference camera JSON, or ``None``.
+    meta
+        Free-form extra data carried through unchanged.
+    source
+        The file the scene was loaded from (``None`` for a scene built in memory).
+    """
+
+    objects: list[SceneObject]
+    ground_height: float = 0.0
+    camera: Path | None = None
+    meta: dict = field(default_factory=dict)
+    source: Path | None = None
+
+    @property
+    def ids(self) -> list[str]:
+        return [o.id for o in self.objects]
+
+    def __len__(self) -> int:
+        return len(self.objects)
+
+    def get(self, object_id: str) -> SceneObject:
+        """The object named ``object_id`` (KeyError with the known ids otherwise)."""
+        for o in self.objects:
+            if o.id == object_id:
+                return o
+        raise KeyError(f"no object {object_id!r} in scene (objects: {', '.join(self.ids)})")
+
+    def with_poses(self, poses: dict[str, np.ndarray], meta: dict | None = None) -> "Scene":
+        """A copy of the scene with some poses replaced (meshes shared)."""
+        out = copy.deepcopy(self)
+        for o in out.objects:
+            if o.id in poses:
+                o.pose = np.array(poses[o.id], dtype=float)
+        if meta is not None:
+            out.meta = {**out.meta, **meta}
+        return out
+
+
+def _rel(target: Path, start: Path) -> str:
+    return Path(os.path.relpath(Path(target).resolve(), Path(start).resolve())).as_posix()
+
+
+def scene_to_dict(scene: Scene, json_dir: Path) -> dict:
+    """Serialise ``scene`` with paths relative to ``json_dir``."""
+    objs = []
+    for o in scene.objects:
+        d = {"id": o.id, "description": o.description, "mesh": _rel(o.mesh_path, json_dir),
+             "pose": np.asarray(o.pose, dtype=float).round(12).tolist()}
+        if o.color is not None:
+            d["color"] = [int(c) for c in o.color]
+        if o.meta:
+            d["meta"] = o.meta
+        objs.append(d)
+    out = {"format": FORMAT, "units": "m", "up": [0, 0, 1], "ground": {"height": float(scene.ground_height)},
+           "objects": objs}
+    if scene.camera is not None:
+        out["camera"] = _rel(scene.camera, json_dir)
+    if scene.meta:
+        out["meta"] = scene.meta
+    return out
+
+
+def save_scene(scene: Scene, path: str | Path) -> Path:
+    """Write ``scene`` to ``path`` atomically; mesh paths are made relative to it.
+
+    Returns
+    -------
+    The written path.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_json(path, scene_to_dict(scene, path.parent))
+    return path
+
+
+def load_scene(path: str | Path, check_meshes: bool = True) -> Scene:
+    """Load and validate a ``scene.json``.
+
+    Parameters
+    ----------
+    path
+        The scene file.
+    check_meshes
+        Also load every mesh and check it is usable (non-empty, finite, positive volume).
+
+    Raises
+    ------
+    InputError
+        Naming the file and field of the first problem: schema violations,
+        unknown format version, non-rigid or non-finite poses, duplicate ids,
+        missing or unusable mesh files, coordinates far beyond any room.
+    """
+    path = Path(path)
+    data = schemas.read_json(path)
+    if isinstance(data, dict) and "format" not in data:
+        raise InputError(path, "format", "missing; expected 'phiscene.scene/1'")
+    schemas.validate(data, "scene", path)
+    root = path.parent
+    seen: set[str] = set()
+    objects = []
+    for i, d in enumerate(data["objects"]):
+        where = f"objects[{i}]"
+        if d["id"] in seen:
+            raise InputError(path, f"{where}.id", f"duplicate object id {d['id']!r}")
+        seen.add(d["id"])
+        pose = np.asarray(d["pose"], dtype=float)
+        why = rigidity_error(pose)
+        if why:
+            raise InputError(path, f"{where}.pose", why)
+        if np.abs(pose[:3, 3]).max() > TOL.max_coordinate:
+            raise InputError(path, f"{where}.pose", f"translation {pose[:3, 3].tolist()} is farther than "
+                             f"{TOL.max_coordinate} m from the origin (units must be metres)")
+        mesh_path = (root / d["mesh"]).resolve()
+        if not mesh_path.is_file():
+            raise InputError(path, f"{where}.mesh", f"mesh file not found: {d['mesh']}")
+        color = tuple(d["color"]) if "color" in d else None
+        objects.append(SceneObject(id=d["id"], mesh_path=mesh_path, pose=pose, description=d.get("description", ""),
+                                   color=color, meta=d.get("meta", {})))
+    camera = data.get("camera")
+    scene = Scene(objects=objects, ground_height=float(data.get("ground", {}).get("height", 0.0)),
+                  camera=(root / camera).resolve() if camera else None, meta=data.get("meta", {}), source=path)
+    if check_meshes:
+        from phiscene.meshes import load_mesh
+
+        for i, o in enumerate(objects):
+            try:
+                load_mesh(o.mesh_path)
+            except InputError as exc:
+                raise InputError(path, f"objects[{i}].mesh", exc.problem) from None
+    return scene

@@ -1,0 +1,1 @@
+"""Rigid-body simulation back ends: pybullet (settling, drift) and MuJoCo (cross-simulator check)."""

@@ -1,0 +1,241 @@
+"""pybullet worlds: one DIRECT client per world, its id passed on every call.
+
+Bodies are built from convex proxies (a compound of convex hulls written to an
+OBJ file whose name is the hash of its content: pybullet caches collision
+meshes by file path). Poses in and out are phiscene poses (local-to-world
+4x4 with uniform scale); the conversion to pybullet's centre-of-mass frame is
+done here and nowhere else.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from phiscene.atomic import write_text
+from phiscene.inertia import RigidProps
+from phiscene.sim.settings import SimSettings
+from phiscene.tolerances import GRAVITY
+from phiscene.transforms import decompose, make_pose, matrix_to_quat_xyzw, quat_xyzw_to_matrix
+
+#: Half thickness of the ground box (m); its top face is the ground plane.
+GROUND_HALF_THICKNESS = 0.5
+#: Half extent of the ground box in x and y (m).
+GROUND_HALF_EXTENT = 50.0
+
+
+def hulls_obj_text(hulls: list[np.ndarray]) -> str:
+    """OBJ text with one ``o`` group per convex hull (pybullet makes each a convex shape).
+
+    Parameters
+    ----------
+    hulls
+        Each ``(v, 3)`` float vertices of one convex piece.
+    """
+    import trimesh
+
+    lines = []
+    offset = 0
+    for k, v in enumerate(hulls):
+        hull = trimesh.convex.convex_hull(np.asarray(v, dtype=float))
+        lines.append(f"o hull{k}")
+        lines.extend(f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in hull.vertices)
+        lines.extend(f"f {a + 1 + offset} {b + 1 + offset} {c + 1 + offset}" for a, b, c in hull.faces)
+        offset += len(hull.vertices)
+    return "\n".join(lines) + "\n"
+
+
+def hulls_obj_file(hulls: list[np.ndarray], cache_dir: str | Path) -> Path:
+    """Write (once) the hulls as an OBJ named by its content hash; return its path."""
+    text = hulls_obj_text(hulls)
+    digest = hashlib.sha256(text.encode()).hexdigest()[:20]
+    path = Path(cache_dir) / "bullet_hulls" / f"{digest}.obj"
+    if not path.exists():
+        write_text(path, text)
+    return path
+
+
+@dataclass
+class _Body:
+    uid: int
+    scale: float
+    inertial: np.ndarray  # (4, 4) COM frame in the scaled, unscaled-rotation link frame
+    dynamic: bool
+
+
+class BulletWorld:
+    """A pybullet DIRECT world with deterministic settings.
+
+    Use as a context manager; the client is disconnected on exit, also on error.
+
+    Parameters
+    ----------
+    settings
+        Physical settings (friction, damping, frame time, substeps, ...).
+    cache_dir
+        Folder for the content-hashed hull OBJ files.
+    """
+
+    def __init__(self, settings: SimSettings, cache_dir: str | Path):
+        self.settings = settings
+        self.cache_dir = Path(cache_dir)
+        self.client: int | None = None
+        self.bodies: dict[str, _Body] = {}
+
+    def __enter__(self) -> "BulletWorld":
+        import pybullet as p
+
+        self.client = p.connect(p.DIRECT)
+        s = self.settings
+        p.resetSimulation(physicsClientId=self.client)
+        p.setPhysicsEngineParameter(
+            fixedTimeStep=s.frame_dt / s.substeps, numSolverIterations=s.solver_iterations,
+            deterministicOverlappingPairs=1, numSubSteps=0, physicsClientId=self.client)
+        p.setGravity(0, 0, -GRAVITY, physicsClientId=self.client)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        import pybullet as p
+
+        if self.client is not None:
+            p.disconnect(physicsClientId=self.client)
+            self.client = None
+
+    # -- building -----------------------------------------------------------------
+    def _surface(self, uid: int) -> None:
+        import pybullet as p
+
+        s = self.settings
+        p.changeDynamics(uid, -1, lateralFriction=s.friction, rollingFriction=s.rolling_friction,
+                         spinningFriction=s.spinning_friction, restitution=s.restitution,
+                         linearDamping=s.linear_damping, angularDamping=s.angular_damping,
+                         physicsClientId=self.client)
+
+    def add_ground(self, height: float) -> int:
+        """A static box whose top face is the plane ``z = height``; returns its body id."""
+        import pybullet as p
+
+        shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=[GROUND_HALF_EXTENT, GROUND_HALF_EXTENT,
+                                                                GROUND_HALF_THICKNESS], physicsClientId=self.client)
+        uid = p.createMultiBody(0.0, shape, basePosition=[0, 0, height - GROUND_HALF_THICKNESS],
+                                physicsClientId=self.client)
+        self._surface(uid)
+        self.bodies["ground"] = _Body(uid, 1.0, np.eye(4), False)
+        return uid
+
+    def add_body(self, name: str, hulls: list[np.ndarray], pose: np.ndarray, props: RigidProps | None) -> int:
+        """Add an object as a compound of convex hulls.
+
+        Parameters
+        ----------
+        name
+            Object id (``ground`` is reserved).
+        hulls
+            Convex pieces, each ``(v, 3)`` unscaled local vertices.
+        pose : (4, 4) float
+            Local-to-world pose, uniform scale allowed.
+        props
+            Mass properties at this pose's scale; ``None`` makes the body static.
+        """
+        import pybullet as p
+
+        if name in self.bodies:
+            raise ValueError(f"body {name!r} already in the world")
+        _, _, scale = decompose(pose)
+        obj = hulls_obj_file(hulls, self.cache_dir)
+        shape = p.createCollisionShape(p.GEOM_MESH, fileName=str(obj), meshScale=[scale] * 3,
+                                       physicsClientId=self.client)
+        if shape < 0:
+            raise RuntimeError(f"pybullet could not build a collision shape for {name!r} from {obj}")
+        if props is None:
+            inertial = np.eye(4)
+            uid = p.createMultiBody(0.0, shape, physicsClientId=self.client)
+        else:
+            inertial = make_pose(props.principal_axes, props.com)
+            uid = p.createMultiBody(props.mass, shape, baseInertialFramePosition=props.com.tolist(),
+                                    baseInertialFrameOrientation=matrix_to_quat_xyzw(props.principal_axes).tolist(),
+                                    physicsClientId=self.client)
+            p.changeDynamics(uid, -1, localInertiaDiagonal=props.principal_moments.tolist(),
+                             physicsClientId=self.client)
+        p.changeDynamics(uid, -1, collisionMargin=self.settings.collision_margin, physicsClientId=self.client)
+        self._surface(uid)
+        self.bodies[name] = _Body(uid, scale, inertial, props is not None)
+        self.set_pose(name, pose)
+        return uid
+
+    # -- poses ----------------------------------------------------------------------
+    def set_pose(self, name: str, pose: np.ndarray) -> None:
+        """Place body ``name`` at phiscene pose ``pose`` (its scale must match the body's) and zero its velocity."""
+        import pybullet as p
+
+        b = self.bodies[name]
+        R, t, _ = decompose(pose)
+        com_frame = make_pose(R, t) @ b.inertial
+        p.resetBasePositionAndOrientation(b.uid, com_frame[:3, 3].tolist(),
+                                          matrix_to_quat_xyzw(com_frame[:3, :3]).tolist(), physicsClientId=self.client)
+        p.resetBaseVelocity(b.uid, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+
+    def pose(self, name: str) -> np.ndarray:
+        """Current phiscene pose (4, 4) of body ``name``, scale included."""
+        import pybullet as p
+
+        b = self.bodies[name]
+        pos, quat = p.getBasePositionAndOrientation(b.uid, physicsClientId=self.client)
+        com_frame = make_pose(quat_xyzw_to_matrix(quat), pos)
+        link = com_frame @ np.linalg.inv(b.inertial)
+        return make_pose(link[:3, :3], link[:3, 3], b.scale)
+
+    def com_position(self, name: str) -> np.ndarray:
+        """World position (3,) of the centre of mass of body ``name``."""
+        import pybullet as p
+
+        pos, _ = p.getBasePositionAndOrientation(self.bodies[name].uid, physicsClientId=self.client)
+        return np.asarray(pos, dtype=float)
+
+    def velocity(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """Linear (3,) and angular (3,) velocity of body ``name``."""
+        import pybullet as p
+
+        lin, ang = p.getBaseVelocity(self.bodies[name].uid, physicsClientId=self.client)
+        return np.asarray(lin), np.asarray(ang)
+
+    def set_static(self, name: str) -> None:
+        """Freeze body ``name`` in place (mass 0)."""
+        import pybullet as p
+
+        b = self.bodies[name]
+        p.changeDynamics(b.uid, -1, mass=0.0, physicsClientId=self.client)
+        p.resetBaseVelocity(b.uid, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+        b.dynamic = False
+
+    # -- stepping -----------------------------------------------------------------
+    def step_frames(self, frames: int = 1) -> None:
+        """Advance ``frames`` frames of ``settings.frame_dt`` (each ``settings.substeps`` steps)."""
+        import pybullet as p
+
+        for _ in range(frames * self.settings.substeps):
+            p.stepSimulation(physicsClientId=self.client)
+
+    def contacts(self, name_a: str, name_b: str | None = None) -> list[dict]:
+        """Contact points of body ``name_a`` (with ``name_b`` only, if given).
+
+        Returns
+        -------
+        A list of dicts with ``other`` (name), ``position`` (3,) on B, ``normal`` (3,) from B to A,
+        ``distance`` (negative = penetration) and ``force`` (normal force, N).
+        """
+        import pybullet as p
+
+        names = {b.uid: n for n, b in self.bodies.items()}
+        a = self.bodies[name_a].uid
+        kw = {"bodyA": a}
+        if name_b is not None:
+            kw["bodyB"] = self.bodies[name_b].uid
+        out = []
+        for c in p.getContactPoints(physicsClientId=self.client, **kw):
+            out.append({"other": names.get(c[2], str(c[2])), "position": np.asarray(c[6]),
+                        "normal": np.asarray(c[7]), "distance": float(c[8]), "force": float(c[9])})
+        return out

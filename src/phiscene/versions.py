@@ -1,0 +1,13 @@
+"""Per-stage behaviour versions.
+
+Each workflow rule passes its stage's version as a ``params:`` value, so that
+bumping one here after a behaviour change reruns exactly the affected jobs
+(Snakemake reruns a job whose params changed).
+"""
+
+BENCHMARK = 1
+PROXIES = 1
+TOPOLOGY = 1
+GROUND = 1
+METRICS = 1
+TABLES = 1

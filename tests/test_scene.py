@@ -1,0 +1,91 @@
+"""scene.json: round trip and one clear error per kind of bad input."""
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+
+from phiscene.errors import InputError
+from phiscene.meshes import save_mesh
+from phiscene.scene import Scene, SceneObject, load_scene, save_scene
+from phiscene.transforms import make_pose, rotation_z
+
+
+@pytest.fixture
+def scene_file(tmp_path):
+    mesh = save_mesh(trimesh.creation.box([0.1, 0.2, 0.3]), tmp_path / "meshes" / "box.glb")
+    objs = [SceneObject("a", mesh, make_pose(rotation_z(0.3), [0, 0, 0.15], 1.2), "a box", (255, 0, 0)),
+            SceneObject("b", mesh, make_pose(translation=[1, 0, 0.15]), "another box", (0, 255, 0))]
+    return save_scene(Scene(objs, ground_height=0.0), tmp_path / "scene" / "scene.json")
+
+
+def edit(path, fn):
+    data = json.loads(path.read_text())
+    fn(data)
+    path.write_text(json.dumps(data))
+    return path
+
+
+def test_round_trip(scene_file, tmp_path):
+    s = load_scene(scene_file)
+    assert s.ids == ["a", "b"]
+    assert s.objects[0].color == (255, 0, 0)
+    np.testing.assert_allclose(s.objects[0].pose, make_pose(rotation_z(0.3), [0, 0, 0.15], 1.2), atol=1e-12)
+    # re-rooting elsewhere keeps meshes reachable through relative paths
+    out = save_scene(s, tmp_path / "elsewhere" / "deep" / "scene.json")
+    assert json.loads(out.read_text())["objects"][0]["mesh"].startswith("../../meshes/")
+    s2 = load_scene(out)
+    assert s2.objects[1].mesh_path == s.objects[1].mesh_path
+    w = s2.objects[0].world_mesh()
+    assert np.isclose(w.volume, 0.1 * 0.2 * 0.3 * 1.2**3)
+
+
+@pytest.mark.parametrize("mutate, field, words", [
+    (lambda d: d.update(format="phiscene.scene/9"), "format", "unknown format"),
+    (lambda d: d.pop("format"), "format", "missing"),
+    (lambda d: d["objects"][1].update(id="a"), "objects[1].id", "duplicate"),
+    (lambda d: d["objects"][0].update(mesh="meshes/nope.glb"), "objects[0].mesh", "not found"),
+    (lambda d: d["objects"][0]["pose"][0].__setitem__(3, float("nan")), "objects[0].pose", "NaN"),
+    (lambda d: d["objects"][0]["pose"][0].__setitem__(0, 3.0), "objects[0].pose", "shear or non-uniform"),
+    (lambda d: d["objects"][0]["pose"].__setitem__(0, [-1, 0, 0, 0]), "objects[0].pose", "reflection"),
+    (lambda d: d["objects"][1]["pose"][0].__setitem__(3, 5e4), "objects[1].pose", "metres"),
+    (lambda d: d["objects"][0].pop("pose"), "objects[0]", "pose"),
+    (lambda d: d["objects"][0].update(color=[300, 0, 0]), "objects[0].color[0]", "300"),
+])
+def test_bad_scene_names_file_and_field(scene_file, mutate, field, words):
+    # json.dumps writes NaN as a bare token, which json.loads reads back: exactly what a buggy writer produces
+    edit(scene_file, mutate)
+    with pytest.raises(InputError) as exc:
+        load_scene(scene_file)
+    msg = str(exc.value)
+    assert str(scene_file) in msg and field in msg and words in msg, msg
+    assert "\n" not in msg
+
+
+@pytest.mark.parametrize("content, words", [
+    (b"", "empty"),
+    (b"this is not a mesh at all", "cannot read"),
+])
+def test_bad_mesh_file(scene_file, content, words):
+    (scene_file.parent.parent / "meshes" / "box.glb").write_bytes(content)
+    with pytest.raises(InputError) as exc:
+        load_scene(scene_file)
+    assert "objects[0].mesh" in str(exc.value) and words in str(exc.value)
+
+
+def test_flat_mesh_refused(scene_file):
+    flat = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], [[0, 1, 2], [1, 3, 2]])
+    path = scene_file.parent.parent / "meshes" / "box.glb"
+    path.unlink()
+    flat.export(path.with_suffix(".ply"))
+    edit(scene_file, lambda d: [o.update(mesh="../meshes/box.ply") for o in d["objects"]])
+    with pytest.raises(InputError, match="no volume"):
+        load_scene(scene_file)
+
+
+def test_not_json(tmp_path):
+    p = tmp_path / "scene.json"
+    p.write_text("{not json")
+    with pytest.raises(InputError, match=r"scene.json: not valid JSON \(line 1"):
+        load_scene(p)

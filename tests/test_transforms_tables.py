@@ -1,0 +1,70 @@
+"""Pose helpers, atomic writes and table aggregation against hand-computed answers."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.spatial.transform import Rotation
+
+from phiscene.atomic import atomic_path, write_json
+from phiscene.tables import average_rank, physical_table, to_markdown, PHYS_COLUMNS
+from phiscene.transforms import (decompose, invert, make_pose, matrix_to_quat_wxyz, quat_wxyz_to_matrix,
+                                 rigidity_error, rotation_angle, transform_points)
+
+
+def test_pose_compose_invert():
+    R = Rotation.from_euler("xyz", [0.3, -0.2, 1.1]).as_matrix()
+    T = make_pose(R, [1, 2, 3], 1.5)
+    Rd, t, s = decompose(T)
+    np.testing.assert_allclose(Rd, R, atol=1e-12)
+    assert s == pytest.approx(1.5)
+    np.testing.assert_allclose(invert(T) @ T, np.eye(4), atol=1e-12)
+    p = np.array([[0.1, 0.2, 0.3]])
+    np.testing.assert_allclose(transform_points(T, p), 1.5 * p @ R.T + [1, 2, 3])
+    assert rigidity_error(T) is None
+
+
+def test_quaternion_convention_wxyz():
+    # 90 degrees about z: w = cos(45), z = sin(45)
+    q = [np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)]
+    R = quat_wxyz_to_matrix(q)
+    np.testing.assert_allclose(R @ [1, 0, 0], [0, 1, 0], atol=1e-12)
+    np.testing.assert_allclose(matrix_to_quat_wxyz(R), q, atol=1e-12)
+    assert np.degrees(rotation_angle(np.eye(3), R)) == pytest.approx(90)
+
+
+def test_atomic_write_leaves_nothing_on_failure(tmp_path):
+    target = tmp_path / "out.json"
+    with pytest.raises(RuntimeError):
+        with atomic_path(target) as tmp:
+            tmp.write_text("half")
+            raise RuntimeError("killed")
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(ValueError):
+        write_json(target, {"x": float("nan")})
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_average_rank_matches_paper_convention():
+    # Paper Tab. 3 rows (drift trans, drift rot) -> A.R. 6.0, 5.0, 3.0, 3.0, 3.0, 1.0
+    df = pd.DataFrame({"t": [5.5426, 3.6252, 0.6573, 0.7344, 0.5992, 0.0405],
+                       "r": [113.2394, 81.0499, 66.1770, 52.4032, 70.0730, 6.9597]},
+                      index=["SceneGen", "MIDI", "Gen3DSR", "SAM3D", "DepR", "phi"])
+    ar = average_rank(df, {"t": "min", "r": "min"})
+    np.testing.assert_allclose(ar.values, [6.0, 5.0, 3.0, 3.0, 3.0, 1.0])
+
+
+def test_physical_table_means_over_scenes(tmp_path):
+    files = {}
+    for m, vals in {"a": [0.0, 0.2], "b": [0.1, 0.1]}.items():
+        files[m] = []
+        for k, v in enumerate(vals):
+            p = tmp_path / f"{m}{k}.json"
+            p.write_text(json.dumps({"pen_depth": v, "float_dist": v, "drift_trans": v, "drift_rot": 10 * v}))
+            files[m].append(p)
+    df = physical_table(files)
+    assert df.loc["a", "pen_depth"] == pytest.approx(0.1) and df.loc["b", "drift_rot"] == pytest.approx(1.0)
+    assert (df["avg_rank"] == 1).all()  # ties share the better rank
+    md = to_markdown(df, PHYS_COLUMNS)
+    assert "**0.1000**" in md

@@ -1,0 +1,44 @@
+# Methods: each writes results/methods/{method}/{suite}/{scene}/scene.json (the shared contract).
+# Reference rows (gt, initial) copy a benchmark scene; phi_scene-kind methods ground the initial scene.
+
+
+rule reference_method:
+    input:
+        scene=lambda wc: f"results/scenes/{wc.suite}/{wc.scene}/{config['methods'][wc.method]['source']}/scene.json",
+    output:
+        scene="results/methods/{method}/{suite}/{scene}/scene.json",
+    wildcard_constraints:
+        method=alternation(methods_of_kind("reference")),
+    log:
+        "results/logs/methods/{method}/{suite}/{scene}.log",
+    threads: 1
+    conda:
+        ENV
+    script:
+        "../scripts/reference_method.py"
+
+
+rule phi_scene:
+    input:
+        scene="results/scenes/{suite}/{scene}/initial/scene.json",
+        topology=lambda wc: f"results/topology/{config['methods'][wc.method]['topology']}/{wc.suite}/{wc.scene}.json",
+        proxies="results/proxies/{suite}/{scene}.npz",
+    output:
+        scene="results/methods/{method}/{suite}/{scene}/scene.json",
+        log_json="results/methods/{method}/{suite}/{scene}/assembly.json",
+    wildcard_constraints:
+        method=alternation(methods_of_kind("phi_scene")),
+    params:
+        assembly=lambda wc: {**config["assembly"], **config["methods"][wc.method].get("assembly", {})},
+        sim=config["sim"],
+        cache_dir=CACHE,
+        version=V.GROUND,
+    log:
+        "results/logs/methods/{method}/{suite}/{scene}.log",
+    benchmark:
+        "results/benchmarks/methods/{method}/{suite}/{scene}.tsv"
+    threads: 1
+    conda:
+        ENV
+    script:
+        "../scripts/ground.py"

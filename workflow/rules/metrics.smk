@@ -1,0 +1,40 @@
+# Per-scene metrics of any method's scene.json.
+
+
+rule physical_metrics:
+    input:
+        scene="results/methods/{method}/{suite}/{scene}/scene.json",
+        proxies="results/proxies/{suite}/{scene}.npz",
+    output:
+        "results/metrics/physical/{method}/{suite}/{scene}.json",
+    params:
+        physical=config["metrics"]["physical"],
+        sim=config["sim"],
+        cache_dir=CACHE,
+        version=V.METRICS,
+    log:
+        "results/logs/metrics/physical/{method}/{suite}/{scene}.log",
+    benchmark:
+        "results/benchmarks/metrics/physical/{method}/{suite}/{scene}.tsv"
+    threads: 1
+    conda:
+        ENV
+    script:
+        "../scripts/physical_metrics.py"
+
+
+rule topology_metrics:
+    input:
+        predicted="results/topology/{backend}/{suite}/{scene}.json",
+        gt="results/scenes/{suite}/{scene}/gt/topology.json",
+    output:
+        "results/metrics/topology/{backend}/{suite}/{scene}.json",
+    params:
+        version=V.METRICS,
+    log:
+        "results/logs/metrics/topology/{backend}/{suite}/{scene}.log",
+    threads: 1
+    conda:
+        ENV
+    script:
+        "../scripts/topology_metrics.py"

@@ -1,0 +1,22 @@
+# Support graph + placement order of the initial scene, one file per topology backend.
+
+
+rule topology:
+    input:
+        scene="results/scenes/{suite}/{scene}/initial/scene.json",
+        given="results/scenes/{suite}/{scene}/gt/topology.json",
+    output:
+        "results/topology/{backend}/{suite}/{scene}.json",
+    params:
+        backend="{backend}",
+        settings=lambda wc: config["topology"].get(wc.backend, {}),
+        version=V.TOPOLOGY,
+    log:
+        "results/logs/topology/{backend}/{suite}/{scene}.log",
+    benchmark:
+        "results/benchmarks/topology/{backend}/{suite}/{scene}.tsv"
+    threads: 1
+    conda:
+        ENV
+    script:
+        "../scripts/topology.py"
