@@ -43,7 +43,7 @@ def run_topology(scene_path: str | Path, out_path: str | Path, backend: str, par
 
     scene = load_scene(scene_path)
     graph = topology.infer(scene, backend, params, given_path=given_path)
-    graph.save(out_path)
+    topology.save(graph, out_path)
     log.info("%s: %d edges, order %s, dropped %d", backend, len(graph.edges), " ".join(graph.order),
              len(graph.dropped_edges))
 
@@ -52,11 +52,11 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
                out_scene: str | Path, out_log: str | Path, assembly: dict, sim: dict, cache_dir: str | Path,
                progress: Callable[[str], None] | None = None) -> None:
     """phi-Scene grounding of one scene in its topology's order."""
+    from phiscene import topology
     from phiscene.assembly.assemble import AssemblyParams, ground_scene
-    from phiscene.topology.graph import SupportGraph
 
     scene = load_scene(scene_path)
-    graph = SupportGraph.load(topology_path, scene=scene)
+    graph = topology.load(topology_path, scene_ids=scene.ids)
     proxies = read_proxies(proxies_path)
     settled, record = ground_scene(scene, graph.order, proxies, AssemblyParams.from_dict(assembly),
                                    SimSettings.from_dict(sim), Path(cache_dir), progress=progress or log.info)
@@ -80,11 +80,8 @@ def run_physical_metrics(scene_path: str | Path, proxies_path: str | Path, out_p
 
 def run_topology_metrics(predicted_path: str | Path, gt_path: str | Path, out_path: str | Path) -> None:
     """Edge precision, recall and F1 of one predicted support graph."""
-    from phiscene.metrics.topology import edge_scores
-    from phiscene.topology.graph import SupportGraph
+    from phiscene.metrics.topology import file_scores
 
-    pred, gt = SupportGraph.load(predicted_path), SupportGraph.load(gt_path)
-    scores = edge_scores(pred.edge_pairs(), gt.edge_pairs())
-    write_json(out_path, scores)
+    write_json(out_path, file_scores(predicted_path, gt_path).to_dict())
 
 

@@ -56,7 +56,7 @@ class ProxyParams:
     backend: str = "coacd"
     threshold: float = 0.08
     max_hulls: int = 16
-    max_hull_vertices: int = 48
+    max_hull_vertices: int = 512
     preprocess_resolution: int = 40
     resolution: int = 1000
     mcts_iterations: int = 60

@@ -24,14 +24,16 @@ def set_threads(threads: int) -> None:
     threads = max(1, int(threads))
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS"):
         os.environ[var] = str(threads)
-    try:
-        import torch
+    # numpy's BLAS is already loaded, so environment variables come too late for it
+    from threadpoolctl import threadpool_limits
 
+    threadpool_limits(threads)
+    # torch reads OMP_NUM_THREADS when it is first imported; importing it here (1.5 s) would slow every job
+    torch = sys.modules.get("torch")
+    if torch is not None:
         torch.set_num_threads(threads)
         with contextlib.suppress(RuntimeError):
             torch.set_num_interop_threads(1)
-    except ImportError:  # torch is optional for stages that do not use it
-        pass
 
 
 def setup_logging(log_file: str | Path | None = None, level: int = logging.INFO) -> None:

@@ -72,6 +72,15 @@ def topology_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
     return df
 
 
+def _fmt(v: float, digits: int) -> str:
+    """Fixed-point like the paper, scientific for values too small to show that way."""
+    if pd.isna(v):
+        return "nan"
+    if v != 0 and abs(v) < 0.5 * 10.0**-digits:
+        return f"{v:.{max(digits - 2, 1)}e}"
+    return f"{v:.{digits}f}"
+
+
 def to_markdown(df: pd.DataFrame, directions: dict[str, str], digits: int = 4) -> str:
     """Markdown table with the best value of each metric in bold and the second underlined."""
     shown = df.copy().astype(object)
@@ -81,7 +90,7 @@ def to_markdown(df: pd.DataFrame, directions: dict[str, str], digits: int = 4) -
         order = df[c].rank(method="min", ascending=(d == "min"))
         for idx in df.index:
             v = df.at[idx, c]
-            s = "nan" if pd.isna(v) else f"{v:.{digits}f}"
+            s = _fmt(v, digits)
             if order[idx] == 1:
                 s = f"**{s}**"
             elif order[idx] == 2:

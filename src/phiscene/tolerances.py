@@ -25,6 +25,12 @@ class Tolerances:
         Generalised winding number above which a point is inside a mesh.
     max_coordinate
         Largest accepted absolute world coordinate (m); farther is refused as a unit error.
+    sdf_aabb_pad
+        Padding of a mesh's bounding box, as a fraction of its diagonal, inside which
+        signed distance evaluates the winding number (points outside are outside).
+    footprint_resolution
+        Footprint areas (m^2) are compared in units of this when ordering objects, so equal
+        objects tie exactly and fall back to id order.
     """
 
     pose_orthogonality: float = 1e-5
@@ -33,6 +39,8 @@ class Tolerances:
     min_volume: float = 1e-9
     winding_inside: float = 0.5
     max_coordinate: float = 1e3
+    sdf_aabb_pad: float = 1e-6
+    footprint_resolution: float = 1e-6
 
 
 TOL = Tolerances()

@@ -29,6 +29,22 @@ def alternation(names):
     return "|".join(names) if names else "(?!x)x"
 
 
+def table_inputs(metric, table, names):
+    """Per-name lists of metric files of every scene of the table's suite."""
+    suite = config["tables"][table]["suite"]
+    return {name: expand(f"results/metrics/{metric}/{name}/{suite}/{{scene}}.json", scene=scene_ids(suite))
+            for name in names}
+
+
+def topology_inputs(wildcards):
+    """The initial scene, plus the benchmark's ground-truth graph for the `given` backend."""
+    base = f"results/scenes/{wildcards.suite}/{wildcards.scene}"
+    inputs = {"scene": f"{base}/initial/scene.json"}
+    if wildcards.backend == "given":
+        inputs["given"] = f"{base}/gt/topology.json"
+    return inputs
+
+
 wildcard_constraints:
     suite=alternation(list(config["suites"])),
     scene="[A-Za-z0-9_]+",

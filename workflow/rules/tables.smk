@@ -1,13 +1,6 @@
 # Paper tables as CSV + Markdown.
 
 
-def table_inputs(metric, table, names):
-    """Per-name lists of metric files of every scene of the table's suite."""
-    suite = config["tables"][table]["suite"]
-    return {name: expand(f"results/metrics/{metric}/{name}/{suite}/{{scene}}.json", scene=scene_ids(suite))
-            for name in names}
-
-
 rule phys_table:
     input:
         unpack(lambda wc: table_inputs("physical", "phys", config["tables"]["phys"]["methods"])),

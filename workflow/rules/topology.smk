@@ -3,8 +3,7 @@
 
 rule topology:
     input:
-        scene="results/scenes/{suite}/{scene}/initial/scene.json",
-        given="results/scenes/{suite}/{scene}/gt/topology.json",
+        unpack(topology_inputs),
     output:
         "results/topology/{backend}/{suite}/{scene}.json",
     params:

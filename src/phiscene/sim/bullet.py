@@ -239,3 +239,24 @@ class BulletWorld:
             out.append({"other": names.get(c[2], str(c[2])), "position": np.asarray(c[6]),
                         "normal": np.asarray(c[7]), "distance": float(c[8]), "force": float(c[9])})
         return out
+
+    def contact_forces(self) -> dict[tuple[str, str], np.ndarray]:
+        """Total contact force (normal + lateral friction, N) on body A from body B, per touching pair.
+
+        Uses the unfiltered contact query, whose (A, B) order is Bullet's own; a
+        query filtered by body may swap A and B and flips the normal but not the
+        friction directions, so it cannot be summed this way.
+
+        Returns
+        -------
+        ``{(name_a, name_b): (3,) float}``, each touching pair once; the force on B from A is the negative.
+        """
+        import pybullet as p
+
+        names = {b.uid: n for n, b in self.bodies.items()}
+        out: dict[tuple[str, str], np.ndarray] = {}
+        for c in p.getContactPoints(physicsClientId=self.client):
+            f = np.asarray(c[7]) * c[9] + c[10] * np.asarray(c[11]) + c[12] * np.asarray(c[13])
+            key = (names.get(c[1], str(c[1])), names.get(c[2], str(c[2])))
+            out[key] = out.get(key, 0.0) + f
+        return out

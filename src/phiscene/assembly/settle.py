@@ -1,0 +1,225 @@
+"""Rigid-body settling of one active object against a fixed context (paper §3.1.3).
+
+The active object is the only dynamic body of a :class:`~phiscene.sim.bullet.BulletWorld`;
+its settled context (already frozen objects and the ground box) is static.
+Frames of ``SimSettings.frame_dt`` are stepped and the paper's sliding-window
+criterion is tested after every frame ``n >= w``:
+
+    ||x_n - x_{n-w}|| < eps_pos   and   angle(r_n, r_{n-w}) < eps_rot
+
+with ``x`` the translation and ``r`` the rotation of the object's pose.
+
+An object that has not met the criterion by ``max_frames`` (paper: 120) is not
+silently counted as settled. The remedy, in order:
+
+1. ``extra_frames`` more frames with the same settings and criterion;
+2. a damping ramp of ``ramp_frames`` frames: linear and angular damping rise
+   linearly from the settings' values to ``ramp_damping`` (Bullet's damping,
+   fraction of velocity removed per second, < 1), criterion tested every frame;
+3. if the ramp met the criterion, the damping is restored and one more
+   window of ``w`` frames is simulated (``verify``): the object counts as
+   settled only if it still meets the criterion without extra damping.
+
+Whatever the outcome, the result says which stage ended it (``remedy``) and
+the motion over the last window (``residual_translation`` in m,
+``residual_rotation`` in rad); ``settled`` is false when no stage met the
+criterion.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import asdict, dataclass, fields
+
+import numpy as np
+
+from phiscene.sim.bullet import BulletWorld
+from phiscene.transforms import decompose, rotation_angle
+
+
+@dataclass(frozen=True)
+class SettleParams:
+    """Settling parameters (paper values for the criterion and the cap).
+
+    Attributes
+    ----------
+    window
+        Window length ``w`` in frames.
+    eps_pos
+        Translation threshold over a window (m).
+    eps_rot
+        Rotation threshold over a window (rad).
+    max_frames
+        Frames simulated before the remedy starts (paper: 120).
+    extra_frames
+        Remedy 1: further frames at unchanged settings.
+    ramp_frames
+        Remedy 2: frames of the damping ramp (0 = no ramp).
+    ramp_damping
+        Linear and angular damping reached at the end of the ramp (Bullet units, in [0, 1)).
+    verify
+        After a ramp that met the criterion, restore damping and re-test one window.
+    """
+
+    window: int = 15
+    eps_pos: float = 1e-4
+    eps_rot: float = 1e-4
+    max_frames: int = 120
+    extra_frames: int = 120
+    ramp_frames: int = 60
+    ramp_damping: float = 0.9
+    verify: bool = True
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> "SettleParams":
+        """Build from a mapping; unknown keys raise ``ValueError`` naming them."""
+        d = dict(d or {})
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(f"unknown settle parameters {unknown}; known: {sorted(known)}")
+        p = cls(**d)
+        if p.window < 1 or min(p.max_frames, p.extra_frames, p.ramp_frames) < 0:
+            raise ValueError(f"settle window must be >= 1 and frame counts >= 0: {p}")
+        if not 0.0 <= p.ramp_damping < 1.0:
+            raise ValueError(f"settle ramp_damping must be in [0, 1), got {p.ramp_damping}")
+        return p
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class SettleResult:
+    """Outcome of settling one object.
+
+    Attributes
+    ----------
+    pose : (4, 4) float
+        Final pose (scale included).
+    frames
+        Frames simulated in total (remedy and verification included).
+    settled
+        Whether the window criterion was met (see the module docstring).
+    remedy
+        Stage that ended the run: ``none`` (within ``max_frames``), ``extra_frames``, ``damping``, or
+        ``failed``.
+    residual_translation, residual_rotation
+        Motion over the last window (m, rad); ``inf`` if fewer than ``w`` frames ran (``None`` in
+        :meth:`to_dict`).
+    """
+
+    pose: np.ndarray
+    frames: int
+    settled: bool
+    remedy: str
+    residual_translation: float
+    residual_rotation: float
+
+    def to_dict(self) -> dict:
+        return {"frames": self.frames, "settled": self.settled, "remedy": self.remedy,
+                "residual_translation": _finite(self.residual_translation),
+                "residual_rotation": _finite(self.residual_rotation)}
+
+
+def _finite(v: float) -> float | None:
+    return float(v) if np.isfinite(v) else None
+
+
+def window_motion(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """Translation distance (m) and rotation angle (rad) between two poses, each (4, 4)."""
+    Ra, ta, _ = decompose(a)
+    Rb, tb, _ = decompose(b)
+    return float(np.linalg.norm(tb - ta)), rotation_angle(Ra, Rb)
+
+
+class _Window:
+    """The last ``w + 1`` poses of one body and the window criterion on them."""
+
+    def __init__(self, world: BulletWorld, name: str, params: SettleParams):
+        self.world, self.name, self.params = world, name, params
+        self.poses: deque = deque([world.pose(name)], maxlen=params.window + 1)
+        self.frames = 0
+
+    def step(self) -> bool:
+        """Advance one frame; return whether the criterion holds now."""
+        self.world.step_frames(1)
+        self.frames += 1
+        self.poses.append(self.world.pose(self.name))
+        return self.met()
+
+    def motion(self) -> tuple[float, float]:
+        """Motion over the current window (``inf`` while it is not full)."""
+        if len(self.poses) <= self.params.window:
+            return float("inf"), float("inf")
+        return window_motion(self.poses[0], self.poses[-1])
+
+    def met(self) -> bool:
+        dt, dr = self.motion()
+        return dt < self.params.eps_pos and dr < self.params.eps_rot
+
+    def restart(self) -> None:
+        """Forget the history (the next window starts from the current pose)."""
+        self.poses.clear()
+        self.poses.append(self.world.pose(self.name))
+
+
+def _set_damping(world: BulletWorld, name: str, linear: float, angular: float) -> None:
+    import pybullet as p
+
+    p.changeDynamics(world.bodies[name].uid, -1, linearDamping=linear, angularDamping=angular,
+                     physicsClientId=world.client)
+
+
+def settle_object(world: BulletWorld, name: str, params: SettleParams) -> SettleResult:
+    """Simulate the dynamic body ``name`` until the window criterion holds (or every remedy is spent).
+
+    Parameters
+    ----------
+    world
+        A world in which ``name`` is the only dynamic body that matters (the context is static).
+    name
+        Body to settle.
+    params
+        Criterion, cap and remedy settings.
+
+    Returns
+    -------
+    SettleResult
+    """
+    win = _Window(world, name, params)
+
+    def run(frames: int) -> bool:
+        for _ in range(frames):
+            if win.step():
+                return True
+        return False
+
+    if run(params.max_frames):
+        return _result(world, name, win, True, "none")
+    if run(params.extra_frames):
+        return _result(world, name, win, True, "extra_frames")
+    if params.ramp_frames == 0:
+        return _result(world, name, win, False, "failed")
+    s = world.settings
+    met = False
+    try:
+        for k in range(1, params.ramp_frames + 1):
+            f = k / params.ramp_frames
+            _set_damping(world, name, s.linear_damping + f * (params.ramp_damping - s.linear_damping),
+                         s.angular_damping + f * (params.ramp_damping - s.angular_damping))
+            if win.step():
+                met = True
+                break
+    finally:
+        _set_damping(world, name, s.linear_damping, s.angular_damping)
+    if met and params.verify:
+        win.restart()
+        met = run(params.window)
+    return _result(world, name, win, met, "damping" if met else "failed")
+
+
+def _result(world: BulletWorld, name: str, win: _Window, settled: bool, remedy: str) -> SettleResult:
+    dt, dr = win.motion()
+    return SettleResult(pose=world.pose(name), frames=win.frames, settled=settled, remedy=remedy,
+                        residual_translation=dt, residual_rotation=dr)

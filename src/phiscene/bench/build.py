@@ -1,0 +1,264 @@
+"""Build one benchmark scene: template -> simulated ground truth -> degraded initial scene -> reference render.
+
+:func:`build_scene` is the entry point of the Snakemake benchmark rule. It is a
+deterministic function of its arguments (same params -> byte-identical files on
+the same machine) and writes its output folder atomically: everything is built
+in a temporary sibling folder that is renamed to ``out_dir`` at the end.
+
+Output layout::
+
+    out_dir/meshes/obj_XX.glb           local-frame meshes (shared by gt and initial)
+    out_dir/gt/scene.json               ground truth at rest
+    out_dir/gt/topology.json            GT support graph (backend "gt")
+    out_dir/initial/scene.json          degraded scene
+    out_dir/reference/image.png         RGB render of the GT scene
+    out_dir/reference/segmentation.png  instance colours (= objects' "color"), black background
+    out_dir/reference/camera.json       camera (see phiscene.bench.render)
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+
+from phiscene import schemas
+from phiscene.atomic import write_json
+from phiscene.bench.assets import ASSET_VERSION, asset_library
+from phiscene.bench.degrade import DegradeParams, degrade_scene
+from phiscene.bench.groundtruth import GroundTruth, GTParams, ground_truth
+from phiscene.bench.render import RenderParams, camera_for, labels_to_colors, render, save_png, segmentation_colors
+from phiscene.bench.templates import GROUND, TEMPLATES, Placement, TemplateError, TemplateParams, template_names
+from phiscene.meshes import save_mesh
+from phiscene.proxies import ProxyParams
+from phiscene.scene import Scene, SceneObject, save_scene
+from phiscene.sim.settings import SimSettings
+
+log = logging.getLogger(__name__)
+
+#: Bump when the benchmark generator changes in a way that changes its output.
+BENCH_VERSION = 1
+
+
+@dataclass(frozen=True)
+class BenchParams:
+    """The ``benchmark`` config section, parsed.
+
+    Attributes
+    ----------
+    seed
+        Benchmark seed (scene seeds derive from it, the suite and the scene index).
+    n_assets
+        Size of the asset library (>= 16 holds every category).
+    n_objects
+        Inclusive range of objects per scene.
+    templates
+        Templates to cycle through (scene ``index`` uses ``templates[index % len]``); empty = all of the suite.
+    max_attempts
+        Scenes resampled at most this often before giving up.
+    template, gt, degrade, render, sim, proxies
+        Sections for :class:`TemplateParams`, :class:`GTParams`, :class:`DegradeParams`,
+        :class:`RenderParams`, :class:`SimSettings`, :class:`ProxyParams`.
+    """
+
+    seed: int = 0
+    n_assets: int = 48
+    n_objects: tuple[int, int] = (3, 8)
+    templates: tuple[str, ...] = ()
+    max_attempts: int = 25
+    template: TemplateParams = field(default_factory=TemplateParams)
+    gt: GTParams = field(default_factory=GTParams)
+    degrade: DegradeParams = field(default_factory=DegradeParams)
+    render: RenderParams = field(default_factory=RenderParams)
+    sim: SimSettings = field(default_factory=SimSettings)
+    proxies: ProxyParams = field(default_factory=ProxyParams)
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> "BenchParams":
+        """Parse a config mapping; unknown keys (also inside sections) raise ``ValueError`` naming them."""
+        d = dict(d or {})
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(f"unknown benchmark parameters {unknown}; known: {sorted(known)}")
+        sections = {"template": TemplateParams, "gt": GTParams, "degrade": DegradeParams, "render": RenderParams,
+                    "sim": SimSettings, "proxies": ProxyParams}
+        for key, typ in sections.items():
+            d[key] = typ.from_dict(d.get(key))
+        lo, hi = (int(v) for v in d.get("n_objects", (3, 8)))
+        if not 1 <= lo <= hi:
+            raise ValueError(f"benchmark n_objects must be [min, max] with 1 <= min <= max, got {[lo, hi]}")
+        d["n_objects"] = (lo, hi)
+        d["templates"] = tuple(d.get("templates") or ())
+        return cls(**d)
+
+
+def default_params() -> dict:
+    """The default ``benchmark`` config section as plain data (what config.yaml carries)."""
+    from dataclasses import asdict
+
+    p = BenchParams()
+    out = asdict(p)
+    out["n_objects"] = list(p.n_objects)
+    out["templates"] = list(p.templates)
+    out["render"]["light_direction"] = list(p.render.light_direction)
+    return out
+
+
+def scene_seed(seed: int, suite: str, index: int) -> int:
+    """Stable 63-bit seed of scene ``index`` of ``suite`` (SHA-256, independent of Python's ``hash``)."""
+    digest = hashlib.sha256(f"phiscene.bench/{BENCH_VERSION}/{seed}/{suite}/{index}".encode()).digest()
+    return int.from_bytes(digest[:8], "little") >> 1
+
+
+def object_ids(n: int) -> list[str]:
+    """``obj_01`` ... ``obj_NN``."""
+    return [f"obj_{k + 1:02d}" for k in range(n)]
+
+
+def _write_meshes(placements: list[Placement], order: np.ndarray, mesh_dir: Path) -> Scene:
+    """Save the placements' meshes as ``obj_XX.glb`` (ids in shuffled ``order``) and return the scene."""
+    ids = object_ids(len(placements))
+    colors = segmentation_colors(len(placements))
+    id_of = {int(k): ids[j] for j, k in enumerate(order)}
+    objects = []
+    for j, k in enumerate(order):
+        pl = placements[int(k)]
+        path = save_mesh(pl.asset.mesh, mesh_dir / f"{ids[j]}.glb")
+        intended = sorted("ground" if s == GROUND else id_of[s] for s in pl.supporters)
+        objects.append(SceneObject(id=ids[j], mesh_path=path.resolve(), pose=np.array(pl.pose, dtype=float),
+                                   description=pl.asset.description, color=colors[j],
+                                   meta={"asset": pl.asset.name, "category": pl.asset.category,
+                                         "rgb": [int(c) for c in pl.asset.rgb], "role": pl.role,
+                                         "intended_supporters": intended}))
+    return Scene(objects=objects, ground_height=0.0)
+
+
+def _attempt(suite: str, template: str, n_objects: int, library: tuple, rng: np.random.Generator,
+             p: BenchParams, mesh_dir: Path, cache_dir: Path) -> tuple[GroundTruth | None, str | None, dict | None,
+                                                                        tuple | None]:
+    try:
+        placements = TEMPLATES[suite][template](library, n_objects, rng, p.template)
+    except TemplateError as exc:
+        return None, f"template: {exc}", None, None
+    order = rng.permutation(len(placements))
+    if mesh_dir.exists():
+        shutil.rmtree(mesh_dir)
+    scene = _write_meshes(placements, order, mesh_dir)
+    intended = {o.id: set(o.meta["intended_supporters"]) for o in scene.objects}
+    gt = ground_truth(scene, p.sim, p.proxies, cache_dir, p.gt, intended)
+    if gt.problem:
+        return gt, gt.problem, None, None
+    camera = camera_for(gt.scene, p.render)
+    rgb, labels = render(gt.scene, camera, shadow=p.render.shadow, light_direction=p.render.light_direction)
+    counts = np.bincount(labels[labels >= 0].ravel(), minlength=len(scene.objects))
+    hidden = [o.id for o, c in zip(gt.scene.objects, counts) if c < p.render.min_visible_pixels]
+    if hidden:
+        return gt, f"hidden in the reference view: {', '.join(hidden)} (< {p.render.min_visible_pixels} px)", None, None
+    return gt, None, camera, (rgb, labels)
+
+
+def build_scene(out_dir: Path, suite: str, index: int, params: dict, cache_dir: Path) -> None:
+    """Build scene ``index`` of benchmark ``suite`` into ``out_dir`` (replaced atomically).
+
+    Parameters
+    ----------
+    out_dir
+        Scene folder to create (e.g. ``results/scenes/contact/scene_000``).
+    suite
+        Benchmark suite (a key of :data:`phiscene.bench.templates.TEMPLATES`, e.g. ``contact``).
+    index
+        Scene number within the suite (>= 0); picks the template and, with the seed, all random choices.
+    params
+        The ``benchmark`` config section (see :class:`BenchParams`; missing keys take defaults).
+    cache_dir
+        Shared cache folder (collision proxies, hull OBJ files).
+
+    Raises
+    ------
+    ValueError
+        Unknown parameters or suite.
+    RuntimeError
+        No accepted scene within ``max_attempts`` (the message lists each attempt's reason).
+    """
+    t_start = time.perf_counter()
+    p = BenchParams.from_dict(params)
+    out_dir, cache_dir = Path(out_dir), Path(cache_dir)
+    names = list(p.templates) or template_names(suite)
+    unknown = sorted(set(names) - set(template_names(suite)))
+    if unknown:
+        raise ValueError(f"unknown templates {unknown} for suite {suite!r}; known: {template_names(suite)}")
+    if index < 0:
+        raise ValueError(f"scene index must be >= 0, got {index}")
+    template = names[index % len(names)]
+    sseed = scene_seed(p.seed, suite, index)
+    n_objects = int(np.random.default_rng([sseed, 0]).integers(p.n_objects[0], p.n_objects[1] + 1))
+    library = asset_library(p.seed, p.n_assets, cache_dir)
+
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    try:
+        reasons = []
+        for attempt in range(p.max_attempts):
+            rng = np.random.default_rng([sseed, 1, attempt])
+            gt, problem, camera, images = _attempt(suite, template, n_objects, library, rng, p, tmp / "meshes",
+                                                   cache_dir)
+            if problem is None:
+                break
+            reasons.append(f"attempt {attempt}: {problem}")
+            log.info("%s/%d: %s", suite, index, reasons[-1])
+        else:
+            raise RuntimeError(f"benchmark scene {suite}/{index} ({template}): no stable scene in {p.max_attempts} "
+                               f"attempts:\n  " + "\n  ".join(reasons))
+        _write_outputs(tmp, gt, camera, images, p, suite, index, template, sseed, attempt)
+        _replace_dir(tmp, out_dir)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+    log.info("%s/%d (%s, %d objects, attempt %d) built in %.2f s", suite, index, template, n_objects, attempt,
+             time.perf_counter() - t_start)
+
+
+def _write_outputs(root: Path, gt: GroundTruth, camera: dict, images: tuple, p: BenchParams, suite: str,
+                   index: int, template: str, sseed: int, attempt: int) -> None:
+    rgb, labels = images
+    camera_path = root / "reference" / "camera.json"
+    meta = {"suite": suite, "index": index, "template": template, "seed": sseed, "benchmark_seed": p.seed,
+            "attempt": attempt, "generator": f"phiscene.bench/{BENCH_VERSION} assets/{ASSET_VERSION}"}
+    gt_scene = gt.scene
+    gt_scene.camera = camera_path
+    gt_scene.meta = {**meta, "state": "gt", "settle_frames": gt.settle_frames,
+                     "max_drift_m": max(gt.drift_m.values()), "max_drift_deg": max(gt.drift_deg.values())}
+    initial = degrade_scene(gt_scene, p.degrade, [sseed, 2])
+    initial.meta = {**meta, **initial.meta}
+    for o in initial.objects:  # the initial scene must not reveal the template's support intent
+        o.meta = {k: v for k, v in o.meta.items() if k not in ("role", "intended_supporters")}
+    colors = [o.color for o in gt_scene.objects]
+    write_json(camera_path, camera)
+    save_png(rgb, root / "reference" / "image.png")
+    save_png(labels_to_colors(labels, colors), root / "reference" / "segmentation.png")
+    topology = {"format": "phiscene.topology/1", "backend": "gt", "objects": ["ground", *gt_scene.ids],
+                "edges": gt.edges, "order": [], "dropped_edges": []}
+    topo_path = root / "gt" / "topology.json"
+    schemas.validate(topology, "topology", topo_path)
+    write_json(topo_path, topology)
+    save_scene(initial, root / "initial" / "scene.json")
+    save_scene(gt_scene, root / "gt" / "scene.json")
+
+
+def _replace_dir(src: Path, dst: Path) -> None:
+    """Rename folder ``src`` to ``dst``, replacing an existing ``dst``."""
+    if dst.exists():
+        trash = Path(tempfile.mkdtemp(prefix=f".{dst.name}.old.", dir=dst.parent))
+        os.replace(dst, trash / dst.name)
+        os.replace(src, dst)
+        shutil.rmtree(trash)
+    else:
+        os.replace(src, dst)

@@ -1,0 +1,314 @@
+"""Reference image, instance segmentation and camera of a scene, rendered on the CPU.
+
+Rendering uses pybullet's TinyRenderer (``ER_TINY_RENDERER``) in a DIRECT
+client, so it needs neither a GPU nor a display. Each object becomes a
+visual-only body built from a temporary OBJ of its world-frame mesh (flat
+shaded); the ground is a large light-grey slab.
+
+``camera.json`` (format ``phiscene.camera/1``)::
+
+    {"format": "phiscene.camera/1", "width": W, "height": H,
+     "fx": .., "fy": .., "cx": .., "cy": ..,
+     "world_to_camera": 4x4, "camera_to_world": 4x4,
+     "convention": "...", "eye": [..], "target": [..], "up": [0, 0, 1],
+     "pybullet": {"view_matrix": [16], "projection_matrix": [16], "fov_y_deg": .., "near": .., "far": ..}}
+
+``world_to_camera`` maps world points to the OpenCV camera frame (x right,
+y down, z forward, metres); a camera-frame point ``(x, y, z)`` projects to the
+pixel ``(u, v) = (fx x / z + cx, fy y / z + cy)`` with pixel centres at integer
+coordinates and ``(0, 0)`` the centre of the top-left pixel. The pybullet
+matrices are the column-major lists that ``computeViewMatrix`` and
+``computeProjectionMatrixFOV`` return (OpenGL conventions).
+"""
+
+from __future__ import annotations
+
+import colorsys
+import tempfile
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+
+from phiscene.errors import InputError
+from phiscene.scene import Scene
+
+CAMERA_FORMAT = "phiscene.camera/1"
+
+#: Colour of the ground slab in the reference image (RGB 0-1).
+GROUND_RGB = (0.82, 0.82, 0.80)
+
+
+@dataclass(frozen=True)
+class RenderParams:
+    """Reference camera and renderer settings.
+
+    Attributes
+    ----------
+    width, height
+        Image size in pixels.
+    fov_y_deg
+        Vertical field of view (deg).
+    azimuth_deg
+        Direction from the scene centre to the camera, counter-clockwise from +x, seen from above (deg).
+    elevation_deg
+        Camera elevation above the horizontal (deg).
+    margin
+        Distance factor (>= 1) applied to the distance at which the scene's bounding box just fits.
+    near, far
+        Clipping planes (m).
+    light_direction
+        Direction towards the light (world, unnormalised).
+    shadow
+        Cast shadows in the reference image.
+    min_visible_pixels
+        Fewest segmentation pixels an object must cover (the benchmark rejects scenes with hidden objects).
+    """
+
+    width: int = 320
+    height: int = 240
+    fov_y_deg: float = 45.0
+    azimuth_deg: float = -60.0
+    elevation_deg: float = 35.0
+    margin: float = 1.1
+    near: float = 0.02
+    far: float = 20.0
+    light_direction: tuple[float, float, float] = (0.4, -0.6, 1.0)
+    shadow: bool = True
+    min_visible_pixels: int = 40
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> "RenderParams":
+        """Build from a config mapping; unknown keys raise ``ValueError`` naming them."""
+        d = dict(d or {})
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise ValueError(f"unknown render parameters {unknown}; known: {sorted(known)}")
+        if "light_direction" in d:
+            d["light_direction"] = tuple(float(v) for v in d["light_direction"])
+        return cls(**d)
+
+
+def segmentation_colors(n: int) -> list[tuple[int, int, int]]:
+    """``n`` distinct, saturated, non-black RGB colours (golden-ratio hue steps, alternating brightness).
+
+    Returns
+    -------
+    list of (r, g, b) ints in 0-255
+    """
+    out = []
+    for i in range(n):
+        h = (0.11 + i * 0.618033988749895) % 1.0
+        v = 1.0 if i % 2 == 0 else 0.7
+        s = 0.9 if (i // 2) % 2 == 0 else 0.6
+        out.append(tuple(int(round(255 * c)) for c in colorsys.hsv_to_rgb(h, s, v)))
+    return out
+
+
+def scene_bounds(scene: Scene) -> np.ndarray:
+    """World AABB (2, 3) of all objects."""
+    b = np.array([o.world_mesh().bounds for o in scene.objects])
+    return np.array([b[:, 0].min(axis=0), b[:, 1].max(axis=0)])
+
+
+def fit_distance(bounds: np.ndarray, target: np.ndarray, back: np.ndarray, half_fov_y: float,
+                 aspect: float) -> float:
+    """Smallest eye distance along ``back`` at which all 8 corners of ``bounds`` (2, 3) are in view.
+
+    Parameters
+    ----------
+    bounds : (2, 3) float
+        World AABB.
+    target : (3,) float
+        Point the camera looks at.
+    back : (3,) unit float
+        Direction from the target to the eye.
+    half_fov_y
+        Half the vertical field of view (rad).
+    aspect
+        Width / height.
+    """
+    right = np.cross([0.0, 0.0, 1.0], back)
+    right /= np.linalg.norm(right)
+    up = np.cross(back, right)
+    tan_y = np.tan(half_fov_y)
+    tan_x = tan_y * aspect
+    corners = np.array([[bounds[i, 0], bounds[j, 1], bounds[k, 2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+    c = corners - target
+    x, y, b = c @ right, c @ up, c @ back
+    # a corner at depth (dist - b) is in view when |x| <= tan_x (dist - b) and |y| <= tan_y (dist - b)
+    need = np.maximum(np.abs(x) / tan_x, np.abs(y) / tan_y) + b
+    return float(need.max())
+
+
+def camera_for(scene: Scene, params: RenderParams) -> dict:
+    """The fixed oblique camera framing ``scene``: looks at the AABB centre from the configured direction.
+
+    Returns
+    -------
+    camera dict (the ``camera.json`` content)
+    """
+    import pybullet as p
+
+    bounds = scene_bounds(scene)
+    target = bounds.mean(axis=0)
+    aspect = params.width / params.height
+    half_fov = np.radians(params.fov_y_deg) / 2
+    az, el = np.radians(params.azimuth_deg), np.radians(params.elevation_deg)
+    back = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])  # target -> eye
+    dist = params.margin * fit_distance(bounds, target, back, half_fov, aspect)
+    eye = target + dist * back
+    view = p.computeViewMatrix(eye.tolist(), target.tolist(), [0, 0, 1])
+    proj = p.computeProjectionMatrixFOV(params.fov_y_deg, aspect, params.near, params.far)
+    gl_world_to_cam = np.asarray(view, dtype=float).reshape(4, 4).T
+    w2c = np.diag([1.0, -1.0, -1.0, 1.0]) @ gl_world_to_cam
+    fy = (params.height / 2) / np.tan(half_fov)
+    return {
+        "format": CAMERA_FORMAT, "width": params.width, "height": params.height,
+        "fx": float(fy), "fy": float(fy), "cx": params.width / 2 - 0.5, "cy": params.height / 2 - 0.5,
+        "world_to_camera": np.round(w2c, 12).tolist(), "camera_to_world": np.round(np.linalg.inv(w2c), 12).tolist(),
+        "convention": "world_to_camera maps world points (z up, m) to the OpenCV camera frame (x right, y down, "
+                      "z forward); pixel (u, v) = (fx x/z + cx, fy y/z + cy), pixel centres at integers, (0, 0) = "
+                      "top-left pixel centre. pybullet matrices are column-major OpenGL (as pybullet returns them).",
+        "eye": eye.tolist(), "target": target.tolist(), "up": [0.0, 0.0, 1.0],
+        "pybullet": {"view_matrix": [float(v) for v in view], "projection_matrix": [float(v) for v in proj],
+                     "fov_y_deg": params.fov_y_deg, "near": params.near, "far": params.far},
+    }
+
+
+def read_camera(path: str | Path) -> dict:
+    """Load and check a ``camera.json`` (InputError naming the file and field on problems)."""
+    from phiscene.schemas import read_json
+
+    cam = read_json(path)
+    if not isinstance(cam, dict) or cam.get("format") != CAMERA_FORMAT:
+        raise InputError(path, "format", f"expected {CAMERA_FORMAT!r}")
+    for key in ("width", "height", "fx", "fy", "cx", "cy", "world_to_camera", "pybullet"):
+        if key not in cam:
+            raise InputError(path, key, "missing")
+    for key in ("view_matrix", "projection_matrix"):
+        if len(cam["pybullet"].get(key, [])) != 16:
+            raise InputError(path, f"pybullet.{key}", "expected 16 numbers")
+    return cam
+
+
+def project(camera: dict, points: np.ndarray) -> np.ndarray:
+    """Pixel coordinates (n, 2) ``(u, v)`` of world points (n, 3) under ``camera``."""
+    T = np.asarray(camera["world_to_camera"], dtype=float)
+    pc = np.asarray(points, dtype=float) @ T[:3, :3].T + T[:3, 3]
+    return np.stack([camera["fx"] * pc[:, 0] / pc[:, 2] + camera["cx"],
+                     camera["fy"] * pc[:, 1] / pc[:, 2] + camera["cy"]], axis=1)
+
+
+def _flat_obj(mesh, path: Path) -> None:
+    m = mesh.copy()
+    m.unmerge_vertices()
+    m.export(path, file_type="obj", include_normals=True, include_texture=False)
+
+
+def render(scene: Scene, camera: dict, colors: list | None = None, shadow: bool = True,
+           light_direction=(0.4, -0.6, 1.0)) -> tuple[np.ndarray, np.ndarray]:
+    """Render ``scene`` from ``camera`` with TinyRenderer.
+
+    Parameters
+    ----------
+    scene
+        Objects to draw (the ground at ``scene.ground_height``).
+    camera
+        A camera dict (see :func:`camera_for`).
+    colors
+        RGB (0-255) of each object in the image; defaults to the object's ``meta["rgb"]``,
+        else its segmentation colour.
+    shadow, light_direction
+        Shading.
+
+    Returns
+    -------
+    rgb : (H, W, 3) uint8
+    labels : (H, W) int32
+        Index of the visible object in ``scene.objects``, -1 for ground and background.
+    """
+    import pybullet as p
+
+    W, H = int(camera["width"]), int(camera["height"])
+    client = p.connect(p.DIRECT)
+    try:
+        uids = {}
+        with tempfile.TemporaryDirectory(prefix="phiscene-render-") as tmp:
+            ground = p.createVisualShape(p.GEOM_BOX, halfExtents=[50, 50, 0.05], rgbaColor=[*GROUND_RGB, 1],
+                                         physicsClientId=client)
+            p.createMultiBody(0, -1, ground, basePosition=[0, 0, scene.ground_height - 0.05], physicsClientId=client)
+            for k, o in enumerate(scene.objects):
+                rgb = (colors[k] if colors is not None else o.meta.get("rgb") or o.color or (150, 150, 150))
+                f = Path(tmp) / f"{k}.obj"
+                _flat_obj(o.world_mesh(), f)
+                vis = p.createVisualShape(p.GEOM_MESH, fileName=str(f), rgbaColor=[c / 255 for c in rgb] + [1],
+                                          physicsClientId=client)
+                uids[p.createMultiBody(0, -1, vis, physicsClientId=client)] = k
+            _, _, px, _, seg = p.getCameraImage(
+                W, H, viewMatrix=camera["pybullet"]["view_matrix"],
+                projectionMatrix=camera["pybullet"]["projection_matrix"], renderer=p.ER_TINY_RENDERER,
+                shadow=int(shadow), lightDirection=list(light_direction), physicsClientId=client)
+    finally:
+        p.disconnect(physicsClientId=client)
+    rgb = np.asarray(px, dtype=np.uint8).reshape(H, W, 4)[:, :, :3].copy()
+    seg = np.asarray(seg, dtype=np.int64).reshape(H, W)
+    labels = np.full((H, W), -1, dtype=np.int32)
+    for uid, k in uids.items():
+        labels[seg == uid] = k
+    return rgb, labels
+
+
+def render_instance_mask(scene: Scene, camera: dict | str | Path) -> np.ndarray:
+    """Instance mask of ``scene`` seen from ``camera`` (a dict or a ``camera.json`` path).
+
+    Returns
+    -------
+    labels : (H, W) int32
+        Index into ``scene.objects`` of the object seen at each pixel, -1 where none.
+    """
+    cam = camera if isinstance(camera, dict) else read_camera(camera)
+    _, labels = render(scene, cam, shadow=False)
+    return labels
+
+
+def labels_to_colors(labels: np.ndarray, colors: list) -> np.ndarray:
+    """Colour an instance mask: pixel of object ``k`` gets ``colors[k]``, background black.
+
+    Returns
+    -------
+    (H, W, 3) uint8
+    """
+    out = np.zeros((*labels.shape, 3), dtype=np.uint8)
+    for k, c in enumerate(colors):
+        out[labels == k] = c
+    return out
+
+
+def colors_to_labels(image: np.ndarray, colors: list) -> np.ndarray:
+    """Inverse of :func:`labels_to_colors`: (H, W, 3) uint8 -> (H, W) int32 (-1 for unknown colours)."""
+    labels = np.full(image.shape[:2], -1, dtype=np.int32)
+    for k, c in enumerate(colors):
+        labels[np.all(image[:, :, :3] == np.asarray(c, dtype=np.uint8), axis=2)] = k
+    return labels
+
+
+def save_png(image: np.ndarray, path: str | Path) -> Path:
+    """Write an (H, W, 3) uint8 image as PNG atomically (no metadata, so bytes are reproducible)."""
+    from PIL import Image
+
+    from phiscene.atomic import atomic_path
+
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        Image.fromarray(np.ascontiguousarray(image[:, :, :3], dtype=np.uint8)).save(tmp, format="PNG", optimize=False)
+    return path
+
+
+def load_png(path: str | Path) -> np.ndarray:
+    """Read a PNG as (H, W, 3) uint8."""
+    from PIL import Image
+
+    with Image.open(path) as im:
+        return np.asarray(im.convert("RGB"))
