@@ -28,3 +28,6 @@ rule all:
     input:
         "results/tables/phys.csv",
         "results/tables/topology.csv",
+        "results/tables/crosssim.csv",
+        "results/tables/recon.csv",
+        "results/tables/runtime.csv",

@@ -68,3 +68,27 @@ def test_physical_table_means_over_scenes(tmp_path):
     assert (df["avg_rank"] == 1).all()  # ties share the better rank
     md = to_markdown(df, PHYS_COLUMNS)
     assert "**0.1000**" in md
+
+
+def test_crosssim_and_runtime_tables(tmp_path):
+    from phiscene.tables import crosssim_table, runtime_table
+
+    def js(name, **v):
+        p = tmp_path / f"{name}.json"
+        p.write_text(json.dumps(v))
+        return p
+
+    bullet = {"a": [js("ba", drift_trans=0.1, drift_rot=1.0)], "b": [js("bb", drift_trans=0.3, drift_rot=3.0)]}
+    mujoco = {"a": [js("ma", drift_trans=0.2, drift_rot=2.0)], "b": [js("mb", drift_trans=0.1, drift_rot=1.0)]}
+    df = crosssim_table(bullet, mujoco)
+    assert df.loc["a", "drift_trans_mujoco"] == 0.2 and df.loc["a", "drift_trans_bullet"] == 0.1
+    assert df.loc["b", "avg_rank"] == 1 and df.loc["a", "avg_rank"] == 2  # ranked on MuJoCo only
+    for stage, secs in [("methods/phi_scene", [1.0, 3.0]), ("proxies", [2.0])]:
+        for k, s in enumerate(secs):
+            p = tmp_path / "bench" / stage / "contact" / f"scene_{k}.tsv"
+            p.parent.mkdir(parents=True, exist_ok=True)
+            p.write_text("s\th:m:s\tmax_rss\tcpu_time\n" f"{s}\t0:00:01\t{100 * (k + 1)}\t{s / 2}\n")
+    rt = runtime_table(tmp_path / "bench")
+    assert rt.loc[("methods/phi_scene", "contact"), "mean_s"] == 2.0
+    assert rt.loc[("methods/phi_scene", "contact"), "max_rss_mb"] == 200
+    assert rt.loc[("proxies", "contact"), "jobs"] == 1

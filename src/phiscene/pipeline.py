@@ -85,3 +85,25 @@ def run_topology_metrics(predicted_path: str | Path, gt_path: str | Path, out_pa
     write_json(out_path, file_scores(predicted_path, gt_path).to_dict())
 
 
+
+
+def run_mujoco_metrics(scene_path: str | Path, proxies_path: str | Path, out_path: str | Path, params: dict,
+                       sim: dict, mujoco: dict) -> None:
+    """Post-simulation drift of one scene in MuJoCo (the cross-simulator check, paper Tab. 3)."""
+    from phiscene.metrics.physical import PhysicalParams
+    from phiscene.sim.mujoco import MujocoParams, drift_mujoco
+
+    scene = load_scene(scene_path)
+    result = drift_mujoco(scene, read_proxies(proxies_path), PhysicalParams.from_dict(params),
+                          SimSettings.from_dict(sim), MujocoParams.from_dict(mujoco))
+    log.info("MuJoCo drift %.4f m / %.2f deg", result["drift_trans"], result["drift_rot"])
+    write_json(out_path, result)
+
+
+def run_recon_metrics(scene_path: str | Path, gt_path: str | Path, out_path: str | Path, params: dict) -> None:
+    """Reconstruction metrics (MIDI-3D protocol) of one scene against its ground truth."""
+    from phiscene.metrics.reconstruction import reconstruction_metrics_file
+
+    result = reconstruction_metrics_file(scene_path, gt_path, out_path, params)
+    log.info("scene CD %.4f, F %.3f, object CD %.4f, F %.3f, bbox IoU %.3f", result["scene_cd"],
+             result["scene_fscore"], result["object_cd"], result["object_fscore"], result["bbox_iou"])

@@ -20,6 +20,12 @@ from phiscene.atomic import write_text
 PHYS_COLUMNS = {"pen_depth": "min", "float_dist": "min", "drift_trans": "min", "drift_rot": "min"}
 #: Topology table columns and whether lower is better.
 TOPO_COLUMNS = {"precision": "max", "recall": "max", "f1": "max"}
+#: Cross-simulator table: ranked on the MuJoCo drift (the independent engine); pybullet shown beside it.
+CROSSSIM_COLUMNS = {"drift_trans_mujoco": "min", "drift_rot_mujoco": "min"}
+#: Reconstruction table (paper Tab. 1): ranked columns; the ICP-only and raw-IoU variants are shown unranked.
+RECON_COLUMNS = {"scene_cd": "min", "scene_fscore": "max", "object_cd": "min", "object_fscore": "max",
+                 "bbox_iou": "max"}
+RECON_EXTRA = ["scene_cd_icp", "scene_fscore_icp", "bbox_iou_raw"]
 
 
 def _read(path: str | Path) -> dict:
@@ -32,6 +38,19 @@ def average_rank(df: pd.DataFrame, directions: dict[str, str]) -> pd.Series:
     return pd.concat(ranks, axis=1).mean(axis=1)
 
 
+def mean_table(files: dict[str, list[str | Path]], keys: list[str], suffix: str = "") -> pd.DataFrame:
+    """Per row name, the mean over its per-scene JSON files of each key (columns ``key + suffix``, plus ``n_scenes``)."""
+    rows = []
+    for name, paths in files.items():
+        vals = [_read(p) for p in paths]
+        row = {"method": name}
+        for k in keys:
+            row[k + suffix] = float(np.mean([v[k] for v in vals])) if vals else float("nan")
+        row["n_scenes"] = len(vals)
+        rows.append(row)
+    return pd.DataFrame(rows).set_index("method")
+
+
 def physical_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
     """Tab. 2: per method the mean over scenes of the scene-level physical metrics.
 
@@ -40,17 +59,50 @@ def physical_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
     files
         Method name -> per-scene physical metric JSON files.
     """
-    rows = []
-    for method, paths in files.items():
-        vals = [_read(p) for p in paths]
-        row = {"method": method}
-        for c in PHYS_COLUMNS:
-            row[c] = float(np.mean([v[c] for v in vals])) if vals else float("nan")
-        row["n_scenes"] = len(vals)
-        rows.append(row)
-    df = pd.DataFrame(rows).set_index("method")
+    df = mean_table(files, list(PHYS_COLUMNS))
     df["avg_rank"] = average_rank(df, PHYS_COLUMNS)
     return df
+
+
+def crosssim_table(bullet: dict[str, list[str | Path]], mujoco: dict[str, list[str | Path]]) -> pd.DataFrame:
+    """Tab. 3: post-simulation drift in MuJoCo (ranked) beside the same protocol in pybullet."""
+    keys = ["drift_trans", "drift_rot"]
+    mj = mean_table(mujoco, keys, "_mujoco")
+    pb = mean_table(bullet, keys, "_bullet").drop(columns="n_scenes")
+    df = mj.join(pb)[[*CROSSSIM_COLUMNS, "drift_trans_bullet", "drift_rot_bullet", "n_scenes"]]
+    df["avg_rank"] = average_rank(df, CROSSSIM_COLUMNS)
+    return df
+
+
+def recon_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
+    """Tab. 1: reconstruction metrics against ground truth (MIDI-3D protocol), means over scenes."""
+    df = mean_table(files, [*RECON_COLUMNS, *RECON_EXTRA])
+    df["avg_rank"] = average_rank(df, RECON_COLUMNS)
+    return df
+
+
+def runtime_table(benchmark_dir: str | Path) -> pd.DataFrame:
+    """Runtime per stage (and method/backend) and suite from Snakemake's ``benchmark:`` TSV files.
+
+    A TSV at ``<benchmark_dir>/<stage...>/<suite>/<scene>.tsv`` counts as one job of
+    ``<stage...>`` on ``<suite>``. Columns: jobs, mean and total wall seconds, mean CPU seconds,
+    max resident memory (MB).
+    """
+    rows = []
+    root = Path(benchmark_dir)
+    for tsv in sorted(root.rglob("*.tsv")):
+        rel = tsv.relative_to(root).parts
+        if len(rel) < 3:
+            continue
+        df = pd.read_csv(tsv, sep="\t")
+        rows.append({"stage": "/".join(rel[:-2]), "suite": rel[-2], "s": float(df["s"].iloc[0]),
+                     "cpu_s": float(pd.to_numeric(df["cpu_time"], errors="coerce").iloc[0]),
+                     "max_rss_mb": float(pd.to_numeric(df["max_rss"], errors="coerce").iloc[0])})
+    if not rows:
+        return pd.DataFrame(columns=["jobs", "mean_s", "total_s", "mean_cpu_s", "max_rss_mb"])
+    g = pd.DataFrame(rows).groupby(["stage", "suite"])
+    return pd.DataFrame({"jobs": g["s"].count(), "mean_s": g["s"].mean(), "total_s": g["s"].sum(),
+                         "mean_cpu_s": g["cpu_s"].mean(), "max_rss_mb": g["max_rss_mb"].max()})
 
 
 def topology_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
@@ -82,18 +134,18 @@ def _fmt(v: float, digits: int) -> str:
 
 
 def to_markdown(df: pd.DataFrame, directions: dict[str, str], digits: int = 4) -> str:
-    """Markdown table with the best value of each metric in bold and the second underlined."""
+    """Markdown table: floats like the paper, the best value of each ranked metric bold, the second underlined."""
     shown = df.copy().astype(object)
-    for c, d in {**directions, "avg_rank": "min"}.items():
-        if c not in df:
+    ranked = {**directions, "avg_rank": "min"}
+    for c in df.columns:
+        if not pd.api.types.is_float_dtype(df[c]):
             continue
-        order = df[c].rank(method="min", ascending=(d == "min"))
+        order = df[c].rank(method="min", ascending=(ranked.get(c) == "min")) if c in ranked else None
         for idx in df.index:
-            v = df.at[idx, c]
-            s = _fmt(v, digits)
-            if order[idx] == 1:
+            s = _fmt(df.at[idx, c], digits)
+            if order is not None and order[idx] == 1:
                 s = f"**{s}**"
-            elif order[idx] == 2:
+            elif order is not None and order[idx] == 2:
                 s = f"<u>{s}</u>"
             shown.at[idx, c] = s
     return shown.to_markdown() + "\n"

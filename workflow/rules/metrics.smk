@@ -38,3 +38,45 @@ rule topology_metrics:
         ENV
     script:
         "../scripts/topology_metrics.py"
+
+
+rule mujoco_metrics:
+    input:
+        scene="results/methods/{method}/{suite}/{scene}/scene.json",
+        proxies="results/proxies/{suite}/{scene}.npz",
+    output:
+        "results/metrics/mujoco/{method}/{suite}/{scene}.json",
+    params:
+        physical=config["metrics"]["physical"],
+        sim=config["sim"],
+        mujoco=config["metrics"]["mujoco"],
+        version=V.METRICS,
+    log:
+        "results/logs/metrics/mujoco/{method}/{suite}/{scene}.log",
+    benchmark:
+        "results/benchmarks/metrics/mujoco/{method}/{suite}/{scene}.tsv"
+    threads: 1
+    conda:
+        ENV
+    script:
+        "../scripts/mujoco_metrics.py"
+
+
+rule recon_metrics:
+    input:
+        scene="results/methods/{method}/{suite}/{scene}/scene.json",
+        gt="results/scenes/{suite}/{scene}/gt/scene.json",
+    output:
+        "results/metrics/recon/{method}/{suite}/{scene}.json",
+    params:
+        recon=config["metrics"]["recon"],
+        version=V.METRICS,
+    log:
+        "results/logs/metrics/recon/{method}/{suite}/{scene}.log",
+    benchmark:
+        "results/benchmarks/metrics/recon/{method}/{suite}/{scene}.tsv"
+    threads: 1
+    conda:
+        ENV
+    script:
+        "../scripts/recon_metrics.py"

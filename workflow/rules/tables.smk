@@ -35,3 +35,60 @@ rule topology_table:
         ENV
     script:
         "../scripts/topology_table.py"
+
+
+rule crosssim_table:
+    input:
+        unpack(lambda wc: table_inputs("mujoco", "crosssim", config["tables"]["crosssim"]["methods"])),
+        unpack(lambda wc: {f"bullet_{k}": v for k, v in
+                           table_inputs("physical", "crosssim", config["tables"]["crosssim"]["methods"]).items()}),
+    output:
+        csv="results/tables/crosssim.csv",
+        md="results/tables/crosssim.md",
+    params:
+        methods=config["tables"]["crosssim"]["methods"],
+        version=V.TABLES,
+    log:
+        "results/logs/tables/crosssim.log",
+    threads: 1
+    conda:
+        ENV
+    script:
+        "../scripts/crosssim_table.py"
+
+
+rule recon_table:
+    input:
+        unpack(lambda wc: table_inputs("recon", "recon", config["tables"]["recon"]["methods"])),
+    output:
+        csv="results/tables/recon.csv",
+        md="results/tables/recon.md",
+    params:
+        methods=config["tables"]["recon"]["methods"],
+        version=V.TABLES,
+    log:
+        "results/logs/tables/recon.log",
+    threads: 1
+    conda:
+        ENV
+    script:
+        "../scripts/recon_table.py"
+
+
+rule runtime_table:
+    input:
+        # every other table: their jobs wrote the benchmark TSVs this table reads
+        [f"results/tables/{t}.csv" for t in ("phys", "topology", "crosssim", "recon")],
+    output:
+        csv="results/tables/runtime.csv",
+        md="results/tables/runtime.md",
+    params:
+        benchmarks="results/benchmarks",
+        version=V.TABLES,
+    log:
+        "results/logs/tables/runtime.log",
+    threads: 1
+    conda:
+        ENV
+    script:
+        "../scripts/runtime_table.py"

@@ -149,8 +149,6 @@ def camera_for(scene: Scene, params: RenderParams) -> dict:
     -------
     camera dict (the ``camera.json`` content)
     """
-    import pybullet as p
-
     bounds = scene_bounds(scene)
     target = bounds.mean(axis=0)
     aspect = params.width / params.height
@@ -159,21 +157,47 @@ def camera_for(scene: Scene, params: RenderParams) -> dict:
     back = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])  # target -> eye
     dist = params.margin * fit_distance(bounds, target, back, half_fov, aspect)
     eye = target + dist * back
+    return look_at_camera(eye, target, params.width, params.height, params.fov_y_deg, params.near, params.far)
+
+
+def look_at_camera(eye: np.ndarray, target: np.ndarray, width: int, height: int, fov_y_deg: float, near: float,
+                   far: float) -> dict:
+    """The camera dict of a pinhole camera at ``eye`` looking at ``target`` with world z up.
+
+    Parameters
+    ----------
+    eye, target : (3,) float
+        Camera centre and the point it looks at (world, m); ``eye - target`` must not be vertical.
+    width, height
+        Image size in pixels.
+    fov_y_deg
+        Vertical field of view (deg).
+    near, far
+        Clipping planes (m).
+
+    Returns
+    -------
+    camera dict (the ``camera.json`` content)
+    """
+    import pybullet as p
+
+    eye, target = np.asarray(eye, dtype=float), np.asarray(target, dtype=float)
+    half_fov = np.radians(fov_y_deg) / 2
     view = p.computeViewMatrix(eye.tolist(), target.tolist(), [0, 0, 1])
-    proj = p.computeProjectionMatrixFOV(params.fov_y_deg, aspect, params.near, params.far)
+    proj = p.computeProjectionMatrixFOV(fov_y_deg, width / height, near, far)
     gl_world_to_cam = np.asarray(view, dtype=float).reshape(4, 4).T
     w2c = np.diag([1.0, -1.0, -1.0, 1.0]) @ gl_world_to_cam
-    fy = (params.height / 2) / np.tan(half_fov)
+    fy = (height / 2) / np.tan(half_fov)
     return {
-        "format": CAMERA_FORMAT, "width": params.width, "height": params.height,
-        "fx": float(fy), "fy": float(fy), "cx": params.width / 2 - 0.5, "cy": params.height / 2 - 0.5,
+        "format": CAMERA_FORMAT, "width": width, "height": height,
+        "fx": float(fy), "fy": float(fy), "cx": width / 2 - 0.5, "cy": height / 2 - 0.5,
         "world_to_camera": np.round(w2c, 12).tolist(), "camera_to_world": np.round(np.linalg.inv(w2c), 12).tolist(),
         "convention": "world_to_camera maps world points (z up, m) to the OpenCV camera frame (x right, y down, "
                       "z forward); pixel (u, v) = (fx x/z + cx, fy y/z + cy), pixel centres at integers, (0, 0) = "
                       "top-left pixel centre. pybullet matrices are column-major OpenGL (as pybullet returns them).",
         "eye": eye.tolist(), "target": target.tolist(), "up": [0.0, 0.0, 1.0],
         "pybullet": {"view_matrix": [float(v) for v in view], "projection_matrix": [float(v) for v in proj],
-                     "fov_y_deg": params.fov_y_deg, "near": params.near, "far": params.far},
+                     "fov_y_deg": fov_y_deg, "near": near, "far": far},
     }
 
 

@@ -1,0 +1,97 @@
+"""Per-stage seconds of the phi-Scene method (topology + SDF + settling) on one core.
+
+1. Every scene of the default contact suite already built under results/ (run
+   ``snakemake -j2 results/tables/phys.csv`` first), warm caches.
+2. One 10-object scene built into a temporary folder: warm-cache timings, and
+   cold CoACD proxy seconds per object (empty cache).
+
+Usage::
+
+    python benchmarks/method_speed.py [--results results] [--objects 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+import yaml  # noqa: E402
+
+from phiscene import topology  # noqa: E402
+from phiscene.assembly.assemble import AssemblyParams, ground_scene  # noqa: E402
+from phiscene.proxies import ProxyParams, proxy_for_mesh, scene_proxies  # noqa: E402
+from phiscene.runner import set_threads  # noqa: E402
+from phiscene.scene import load_scene  # noqa: E402
+from phiscene.sim.settings import SimSettings  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def time_scene(scene_path: Path, cfg: dict, cache: Path) -> dict:
+    """Topology, SDF and settling seconds of one scene (proxies and grids warmed first)."""
+    scene = load_scene(scene_path)
+    proxies = scene_proxies(scene, ProxyParams.from_dict(cfg["proxies"]), cache)
+    params, sim = AssemblyParams.from_dict(cfg["assembly"]), SimSettings.from_dict(cfg["sim"])
+    graph = topology.infer(scene, "geometric", cfg["topology"].get("geometric", {}))
+    ground_scene(scene, graph.order, proxies, params, sim, cache)  # warm: SDF grids, hull files, imports
+    t0 = time.perf_counter()
+    graph = topology.infer(scene, "geometric", cfg["topology"].get("geometric", {}))
+    t_topo = time.perf_counter() - t0
+    _, rec = ground_scene(scene, graph.order, proxies, params, sim, cache)
+    objs = rec["objects"].values() if isinstance(rec["objects"], dict) else rec["objects"]
+    sdf = sum(o["seconds"].get("sdf", 0.0) for o in objs)
+    settle = sum(o["seconds"].get("settle", 0.0) for o in objs)
+    return {"objects": len(scene), "topology_s": t_topo, "sdf_s": sdf, "settle_s": settle,
+            "total_s": t_topo + rec["summary"]["seconds"], "unsettled": len(rec["summary"]["unsettled"])}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--results", default=str(ROOT / "results"))
+    ap.add_argument("--objects", type=int, default=10)
+    args = ap.parse_args()
+    set_threads(1)
+    cfg = yaml.safe_load((ROOT / "config/config.yaml").read_text())
+    results = Path(args.results)
+    cache = results / "cache"
+    scenes = sorted((results / "scenes/contact").glob("*/initial/scene.json"))
+    rows = [time_scene(p, cfg, cache) for p in scenes]
+    if rows:
+        keys = ["objects", "topology_s", "sdf_s", "settle_s", "total_s"]
+        mean = {k: float(np.mean([r[k] for r in rows])) for k in keys}
+        print(f"contact suite, {len(rows)} scenes, warm caches, 1 thread: mean per scene "
+              + ", ".join(f"{k} {v:.2f}" for k, v in mean.items())
+              + f"; max total {max(r['total_s'] for r in rows):.2f} s; unsettled objects "
+              f"{sum(r['unsettled'] for r in rows)}")
+    from phiscene.bench.build import build_scene
+
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        params = {**cfg["benchmark"], "n_objects": [args.objects, args.objects], "templates": ["tabletop"],
+                  "sim": cfg["sim"], "proxies": cfg["proxies"]}
+        build_scene(tmp / "scene", "contact", 0, params, cache)
+        scene_path = tmp / "scene/initial/scene.json"
+        r = time_scene(scene_path, cfg, cache)
+        print(f"{r['objects']}-object scene, warm caches, 1 thread: topology {r['topology_s']:.2f} s, "
+              f"SDF {r['sdf_s']:.2f} s, settling {r['settle_s']:.2f} s, total {r['total_s']:.2f} s "
+              f"(target <= 3 s); unsettled {r['unsettled']}")
+        scene = load_scene(scene_path)
+        cold = []
+        for o in scene.objects:
+            t0 = time.perf_counter()
+            proxy_for_mesh(o.mesh_path, ProxyParams.from_dict(cfg["proxies"]), tmp / "cold-cache")
+            cold.append(time.perf_counter() - t0)
+        print(f"cold CoACD proxies: mean {np.mean(cold):.2f} s per object, max {max(cold):.2f} s "
+              f"(target mean <= 3 s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

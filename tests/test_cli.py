@@ -1,0 +1,51 @@
+"""The `phiscene` command: ground a tiny scene end to end outside Snakemake; errors are one line."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import trimesh
+
+from phiscene.meshes import save_mesh
+from phiscene.scene import Scene, SceneObject, load_scene, save_scene
+from phiscene.transforms import make_pose
+
+
+def phiscene(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "phiscene.cli", *args], cwd=cwd, capture_output=True, text=True,
+                          timeout=300)
+
+
+def test_ground_command_fixes_penetration_and_floating(tmp_path):
+    base = save_mesh(trimesh.creation.box([0.4, 0.4, 0.1]), tmp_path / "meshes/base.glb")
+    cube = save_mesh(trimesh.creation.box([0.1, 0.1, 0.1]), tmp_path / "meshes/cube.glb")
+    # base sunk 1 cm into the ground, cube sunk 2 cm into the base
+    scene = Scene([SceneObject("base", base, make_pose(translation=[0, 0, 0.04])),
+                   SceneObject("cube", cube, make_pose(translation=[0.02, 0, 0.12]))])
+    save_scene(scene, tmp_path / "in/scene.json")
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text("proxies: {backend: convex}\ncache_dir: " + str(tmp_path / "cache") + "\n")
+    res = phiscene("ground", str(tmp_path / "in"), str(tmp_path / "out"), "--config", str(cfg), cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "[3/3] grounding" in res.stdout
+    out = load_scene(tmp_path / "out/scene.json")
+    log = json.loads((tmp_path / "out/assembly.json").read_text())
+    assert log["order"] == ["base", "cube"]
+    # oracle: boxes resting flat -> base centre at 0.05, cube centre at 0.1 + 0.05
+    np.testing.assert_allclose(out.get("base").pose[2, 3], 0.05, atol=1e-3)
+    np.testing.assert_allclose(out.get("cube").pose[2, 3], 0.15, atol=1e-3)
+    metrics = phiscene("metrics", str(tmp_path / "out/scene.json"), "--config", str(cfg), cwd=tmp_path)
+    assert metrics.returncode == 0, metrics.stderr
+    m = json.loads(metrics.stdout)
+    assert m["pen_depth"] < 1e-3 and m["drift_trans"] < 1e-3
+
+
+def test_bad_input_is_one_line(tmp_path):
+    (tmp_path / "in").mkdir()
+    (tmp_path / "in/scene.json").write_text('{"format": "phiscene.scene/1", "objects": [{"id": "a"}]}')
+    res = phiscene("ground", str(tmp_path / "in"), str(tmp_path / "out"), cwd=tmp_path)
+    assert res.returncode == 1
+    assert res.stderr.strip().count("\n") == 0, res.stderr
+    assert "scene.json" in res.stderr and "objects[0]" in res.stderr
+    assert not (tmp_path / "out/scene.json").exists()
