@@ -1,6 +1,7 @@
 # phiscene: physically grounded image-to-3D scene reconstruction, as a Snakemake workflow.
 # Run `snakemake -j2 results/tables/phys.csv` (or `make run`); see README.md.
 
+import glob
 import os
 
 from snakemake.utils import min_version, validate
@@ -23,6 +24,15 @@ include: "workflow/rules/metrics.smk"
 include: "workflow/rules/tables.smk"
 
 
+# Baselines: one rule file each; a method of `kind: <file stem>` in config is built by that file's rule.
+for _baseline in sorted(glob.glob(os.path.join(workflow.basedir, "workflow/rules/baselines/*.smk"))):
+
+    include: _baseline
+
+
+check_method_kinds()
+
+
 rule all:
     default_target: True
     input:
@@ -30,4 +40,5 @@ rule all:
         "results/tables/topology.csv",
         "results/tables/crosssim.csv",
         "results/tables/recon.csv",
+        "results/tables/ablation.csv",
         "results/tables/runtime.csv",

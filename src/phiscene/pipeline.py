@@ -107,3 +107,66 @@ def run_recon_metrics(scene_path: str | Path, gt_path: str | Path, out_path: str
     result = reconstruction_metrics_file(scene_path, gt_path, out_path, params)
     log.info("scene CD %.4f, F %.3f, object CD %.4f, F %.3f, bbox IoU %.3f", result["scene_cd"],
              result["scene_fscore"], result["object_cd"], result["object_fscore"], result["bbox_iou"])
+
+
+def run_baseline(kind: str, scene_path: str | Path, out_scene: str | Path, out_log: str | Path, params: dict,
+                 sim: dict, cache_dir: str | Path, proxies_path: str | Path | None = None,
+                 topology_path: str | Path | None = None) -> None:
+    """One of the paper's baselines (Tab. 6) on one initial scene.
+
+    Parameters
+    ----------
+    kind
+        ``joint_sdf`` (CAST-style), ``joint_sdf_sim``, ``joint_sim`` or ``lift_sim`` (PAT3D-style).
+    params
+        The baseline's parameter mapping (its dataclass' ``from_dict``).
+    proxies_path, topology_path
+        Needed by the simulating baselines and by ``lift_sim`` respectively.
+    """
+    from phiscene import baselines, topology
+
+    scene = load_scene(scene_path)
+    cache_dir = Path(cache_dir)
+    if kind == "joint_sdf":
+        out, record = baselines.joint_sdf(scene, baselines.JointSdfParams.from_dict(params), cache_dir)
+    elif kind in ("joint_sim", "joint_sdf_sim", "lift_sim"):
+        if proxies_path is None:
+            raise ValueError(f"baseline {kind} needs proxies")
+        proxies, simset = read_proxies(proxies_path), SimSettings.from_dict(sim)
+        if kind == "joint_sim":
+            out, record = baselines.joint_sim(scene, proxies, simset, baselines.JointSimParams.from_dict(params),
+                                              cache_dir)
+        elif kind == "joint_sdf_sim":
+            out, record = baselines.joint_sdf_sim(scene, proxies, simset,
+                                                  baselines.JointSdfSimParams.from_dict(params), cache_dir)
+        else:
+            if topology_path is None:
+                raise ValueError("baseline lift_sim needs a topology file")
+            graph = topology.load(topology_path, scene_ids=scene.ids)
+            out, record = baselines.lift_sim(scene, graph, proxies, simset, baselines.LiftParams.from_dict(params),
+                                             cache_dir)
+    else:
+        raise ValueError(f"unknown baseline kind {kind!r}")
+    write_json(out_log, record)
+    save_scene(out, out_scene)
+
+
+def run_external(pred_dir: str | Path, initial_path: str | Path, out_scene: str | Path, out_log: str | Path,
+                 params: dict) -> None:
+    """Import another method's prediction of one scene (meshes, poses.json or a GLB scene) as a method row."""
+    from phiscene.baselines import ImportParams, import_external
+
+    _, record = import_external(pred_dir, initial_path, out_scene, ImportParams.from_dict(params))
+    write_json(out_log, record)
+
+
+def run_alignment_metrics(scene_path: str | Path, initial_path: str | Path, reference_dir: str | Path,
+                          out_path: str | Path, params: dict) -> None:
+    """Reference alignment (per-object mask IoU against the reference segmentation, pose change)."""
+    from phiscene.metrics.alignment import AlignmentParams, alignment_metrics
+
+    result = alignment_metrics(load_scene(scene_path), load_scene(initial_path), Path(reference_dir),
+                               AlignmentParams.from_dict(params))
+    log.info("mask IoU %.3f, pose change %.4f m / %.2f deg", result["mask_iou"], result["pose_change_trans"],
+             result["pose_change_rot"])
+    write_json(out_path, result)

@@ -26,6 +26,8 @@ CROSSSIM_COLUMNS = {"drift_trans_mujoco": "min", "drift_rot_mujoco": "min"}
 RECON_COLUMNS = {"scene_cd": "min", "scene_fscore": "max", "object_cd": "min", "object_fscore": "max",
                  "bbox_iou": "max"}
 RECON_EXTRA = ["scene_cd_icp", "scene_fscore_icp", "bbox_iou_raw"]
+#: Ablation table (paper Tab. 6): reference alignment (mask IoU in place of CLIP-I) + the physical metrics.
+ABLATION_COLUMNS = {"mask_iou": "max", **PHYS_COLUMNS}
 
 
 def _read(path: str | Path) -> dict:
@@ -71,6 +73,15 @@ def crosssim_table(bullet: dict[str, list[str | Path]], mujoco: dict[str, list[s
     pb = mean_table(bullet, keys, "_bullet").drop(columns="n_scenes")
     df = mj.join(pb)[[*CROSSSIM_COLUMNS, "drift_trans_bullet", "drift_rot_bullet", "n_scenes"]]
     df["avg_rank"] = average_rank(df, CROSSSIM_COLUMNS)
+    return df
+
+
+def ablation_table(physical: dict[str, list[str | Path]], alignment: dict[str, list[str | Path]]) -> pd.DataFrame:
+    """Tab. 6: reference alignment (mean per-object mask IoU) and physical metrics per method, with pose change."""
+    align = mean_table(alignment, ["mask_iou", "pose_change_trans", "pose_change_rot"]).drop(columns="n_scenes")
+    df = align.join(mean_table(physical, list(PHYS_COLUMNS)))
+    df = df[[*ABLATION_COLUMNS, "pose_change_trans", "pose_change_rot", "n_scenes"]]
+    df["avg_rank"] = average_rank(df, ABLATION_COLUMNS)
     return df
 
 

@@ -4,7 +4,7 @@ import phiscene.versions as V
 
 RESULTS = "results"
 CACHE = config["cache_dir"]
-ENV = "../../envs/phiscene.yaml"
+ENV = os.path.join(workflow.basedir, "envs/phiscene.yaml")
 
 
 def scene_ids(suite):
@@ -22,6 +22,35 @@ def scene_index(wildcards):
 
 def methods_of_kind(kind):
     return [m for m, spec in config["methods"].items() if spec["kind"] == kind]
+
+
+#: Method kinds with a rule outside workflow/rules/baselines/ (methods.smk).
+BUILTIN_KINDS = ("reference", "phi_scene")
+#: Method kinds whose scenes bring their own meshes (their proxies are computed from the method's scene).
+OWN_MESH_KINDS = ("external",)
+
+
+def check_method_kinds():
+    """Every configured method's kind must have a rule (built in, or workflow/rules/baselines/<kind>.smk)."""
+    import glob as _glob
+
+    known = set(BUILTIN_KINDS) | {
+        os.path.splitext(os.path.basename(f))[0]
+        for f in _glob.glob(os.path.join(workflow.basedir, "workflow/rules/baselines/*.smk"))
+    }
+    for name, spec in config["methods"].items():
+        if spec["kind"] not in known:
+            raise ValueError(
+                f"config: methods.{name}.kind: unknown kind {spec['kind']!r}; known: {sorted(known)} "
+                f"(add workflow/rules/baselines/{spec['kind']}.smk for a new one)"
+            )
+
+
+def proxies_of(wildcards):
+    """Proxies for the simulated metrics of a method's scene."""
+    if config["methods"][wildcards.method]["kind"] in OWN_MESH_KINDS:
+        return f"results/methods/{wildcards.method}/{wildcards.suite}/{wildcards.scene}/proxies.npz"
+    return f"results/proxies/{wildcards.suite}/{wildcards.scene}.npz"
 
 
 def alternation(names):

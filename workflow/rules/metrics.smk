@@ -4,7 +4,7 @@
 rule physical_metrics:
     input:
         scene="results/methods/{method}/{suite}/{scene}/scene.json",
-        proxies="results/proxies/{suite}/{scene}.npz",
+        proxies=proxies_of,
     output:
         "results/metrics/physical/{method}/{suite}/{scene}.json",
     params:
@@ -43,7 +43,7 @@ rule topology_metrics:
 rule mujoco_metrics:
     input:
         scene="results/methods/{method}/{suite}/{scene}/scene.json",
-        proxies="results/proxies/{suite}/{scene}.npz",
+        proxies=proxies_of,
     output:
         "results/metrics/mujoco/{method}/{suite}/{scene}.json",
     params:
@@ -80,3 +80,26 @@ rule recon_metrics:
         ENV
     script:
         "../scripts/recon_metrics.py"
+
+
+rule alignment_metrics:
+    input:
+        scene="results/methods/{method}/{suite}/{scene}/scene.json",
+        initial="results/scenes/{suite}/{scene}/initial/scene.json",
+        image="results/scenes/{suite}/{scene}/reference/image.png",
+        segmentation="results/scenes/{suite}/{scene}/reference/segmentation.png",
+        camera="results/scenes/{suite}/{scene}/reference/camera.json",
+    output:
+        "results/metrics/alignment/{method}/{suite}/{scene}.json",
+    params:
+        alignment=config["metrics"]["alignment"],
+        version=V.METRICS,
+    log:
+        "results/logs/metrics/alignment/{method}/{suite}/{scene}.log",
+    benchmark:
+        "results/benchmarks/metrics/alignment/{method}/{suite}/{scene}.tsv"
+    threads: 1
+    conda:
+        ENV
+    script:
+        "../scripts/alignment_metrics.py"

@@ -78,7 +78,7 @@ rule recon_table:
 rule runtime_table:
     input:
         # every other table: their jobs wrote the benchmark TSVs this table reads
-        [f"results/tables/{t}.csv" for t in ("phys", "topology", "crosssim", "recon")],
+        [f"results/tables/{t}.csv" for t in ("phys", "topology", "crosssim", "recon", "ablation")],
     output:
         csv="results/tables/runtime.csv",
         md="results/tables/runtime.md",
@@ -92,3 +92,23 @@ rule runtime_table:
         ENV
     script:
         "../scripts/runtime_table.py"
+
+
+rule ablation_table:
+    input:
+        unpack(lambda wc: table_inputs("physical", "ablation", config["tables"]["ablation"]["methods"])),
+        unpack(lambda wc: {f"alignment_{k}": v for k, v in
+                           table_inputs("alignment", "ablation", config["tables"]["ablation"]["methods"]).items()}),
+    output:
+        csv="results/tables/ablation.csv",
+        md="results/tables/ablation.md",
+    params:
+        methods=config["tables"]["ablation"]["methods"],
+        version=V.TABLES,
+    log:
+        "results/logs/tables/ablation.log",
+    threads: 1
+    conda:
+        ENV
+    script:
+        "../scripts/ablation_table.py"

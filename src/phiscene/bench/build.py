@@ -31,11 +31,13 @@ import numpy as np
 
 from phiscene import schemas
 from phiscene.atomic import write_json
+from phiscene.bench import rooms  # noqa: F401  (registers the rooms suite: templates, library, defaults)
 from phiscene.bench.assets import ASSET_VERSION, asset_library
 from phiscene.bench.degrade import DegradeParams, degrade_scene
 from phiscene.bench.groundtruth import GroundTruth, GTParams, ground_truth
 from phiscene.bench.render import RenderParams, camera_for, labels_to_colors, render, save_png, segmentation_colors
-from phiscene.bench.templates import GROUND, TEMPLATES, Placement, TemplateError, TemplateParams, template_names
+from phiscene.bench.templates import (GROUND, LIBRARIES, SUITE_DEFAULTS, TEMPLATES, Placement, TemplateError,
+                                      TemplateParams, template_names)
 from phiscene.meshes import save_mesh
 from phiscene.proxies import ProxyParams
 from phiscene.scene import Scene, SceneObject, save_scene
@@ -112,6 +114,23 @@ def default_params() -> dict:
     return out
 
 
+def with_suite_defaults(suite: str, params: dict | None) -> dict:
+    """``params`` over the suite's :data:`~phiscene.bench.templates.SUITE_DEFAULTS`, section by section.
+
+    A key missing from ``params`` takes the suite default; a section (``template``, ``degrade``, ...)
+    given in ``params`` is completed key by key from the suite default's section. Suites without
+    defaults (``contact``) get ``params`` unchanged.
+    """
+    params = dict(params or {})
+    out = dict(SUITE_DEFAULTS.get(suite, {}))
+    for key, value in params.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = {**out[key], **value}
+        else:
+            out[key] = value
+    return out
+
+
 def scene_seed(seed: int, suite: str, index: int) -> int:
     """Stable 63-bit seed of scene ``index`` of ``suite`` (SHA-256, independent of Python's ``hash``)."""
     digest = hashlib.sha256(f"phiscene.bench/{BENCH_VERSION}/{seed}/{suite}/{index}".encode()).digest()
@@ -177,7 +196,8 @@ def build_scene(out_dir: Path, suite: str, index: int, params: dict, cache_dir: 
     index
         Scene number within the suite (>= 0); picks the template and, with the seed, all random choices.
     params
-        The ``benchmark`` config section (see :class:`BenchParams`; missing keys take defaults).
+        The ``benchmark`` config section (see :class:`BenchParams`; missing keys take the suite's
+        defaults (:func:`with_suite_defaults`), then the global ones).
     cache_dir
         Shared cache folder (collision proxies, hull OBJ files).
 
@@ -189,7 +209,7 @@ def build_scene(out_dir: Path, suite: str, index: int, params: dict, cache_dir: 
         No accepted scene within ``max_attempts`` (the message lists each attempt's reason).
     """
     t_start = time.perf_counter()
-    p = BenchParams.from_dict(params)
+    p = BenchParams.from_dict(with_suite_defaults(suite, params))
     out_dir, cache_dir = Path(out_dir), Path(cache_dir)
     names = list(p.templates) or template_names(suite)
     unknown = sorted(set(names) - set(template_names(suite)))
@@ -200,7 +220,7 @@ def build_scene(out_dir: Path, suite: str, index: int, params: dict, cache_dir: 
     template = names[index % len(names)]
     sseed = scene_seed(p.seed, suite, index)
     n_objects = int(np.random.default_rng([sseed, 0]).integers(p.n_objects[0], p.n_objects[1] + 1))
-    library = asset_library(p.seed, p.n_assets, cache_dir)
+    library = LIBRARIES.get(suite, asset_library)(p.seed, p.n_assets, cache_dir)
 
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))

@@ -147,6 +147,15 @@ def register(suite: str, name: str) -> Callable[[Template], Template]:
     return deco
 
 
+#: Asset library of each suite that does not use :func:`phiscene.bench.assets.asset_library`:
+#: ``LIBRARIES[suite](seed, n, cache_dir) -> tuple[Asset, ...]``.
+LIBRARIES: dict[str, Callable] = {}
+
+#: Default ``benchmark`` parameters of a suite, merged under the given ones section by section
+#: (see :func:`phiscene.bench.build.with_suite_defaults`); suites without an entry use the given ones as they are.
+SUITE_DEFAULTS: dict[str, dict] = {}
+
+
 def template_names(suite: str) -> list[str]:
     """Names of the templates of ``suite`` in registration order."""
     if suite not in TEMPLATES:
