@@ -22,6 +22,7 @@ include: "workflow/rules/topology.smk"
 include: "workflow/rules/methods.smk"
 include: "workflow/rules/metrics.smk"
 include: "workflow/rules/tables.smk"
+include: "workflow/rules/export.smk"
 
 
 # Baselines: one rule file each; a method of `kind: <file stem>` in config is built by that file's rule.
@@ -33,6 +34,9 @@ for _baseline in sorted(glob.glob(os.path.join(workflow.basedir, "workflow/rules
 check_method_kinds()
 
 
+include: "workflow/rules/report.smk"
+
+
 rule all:
     default_target: True
     input:
@@ -42,3 +46,4 @@ rule all:
         "results/tables/recon.csv",
         "results/tables/ablation.csv",
         "results/tables/runtime.csv",
+        report_targets(),  # figures and pages of `snakemake --report results/report.html`

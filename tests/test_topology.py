@@ -125,7 +125,7 @@ def test_ground_is_implicit(tmp_path):
     (["ground", "a"], [("ground", "a", 1.5)], {}, "edges[0].confidence", "1.5"),
     (["ground", "a", "b"], [], {"order": ["a"]}, "order", "not a permutation"),
     (["ground", "a"], [], {"format": "phiscene.topology/7"}, "format", "unknown format"),
-    (["ground", "a"], [], {"colour": 1}, "(top level)", "colour"),
+    (["ground", "a"], [], {"colour": 1}, "colour", "unknown field"),
 ])
 def test_bad_topology_names_file_and_field(tmp_path, objects, edges, extra, field, words):
     path = write_topology(tmp_path / "bad.json", objects, edges, **extra)
@@ -420,3 +420,52 @@ def test_file_scores(tmp_path):
     other = write_topology(tmp_path / "other.json", ["ground", "a"], [("ground", "a", 1.0)])
     with pytest.raises(InputError, match="missing scene objects"):
         file_scores(other, gt)
+
+
+# ---------------------------------------------------------------- topology + assembly end to end
+
+def _ground_with_topology(tmp_path, scene):
+    from phiscene.assembly import AssemblyParams, ground_scene
+    from phiscene.proxies import ProxyParams, scene_proxies
+    from phiscene.sim.settings import SimSettings
+
+    g = topology.infer(scene, "geometric")
+    cache = tmp_path / "cache"
+    proxies = scene_proxies(scene, ProxyParams(backend="convex"), cache)
+    out, rec = ground_scene(scene, g.order, proxies, AssemblyParams(), SimSettings(), cache)
+    return g, out, rec
+
+
+def _tilt_deg(pose):
+    """Angle (deg) between the object's local z axis and the world z axis."""
+    return math.degrees(math.acos(np.clip(pose[2, 2] / np.linalg.norm(pose[:3, 2]), -1, 1)))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_leaning_plank_stays_leaning_after_assembly(tmp_path, seed):
+    # oracle: a plank at 25 deg against a wall with friction 0.8 is statically stable (tan 25 deg < 2 mu),
+    # so grounding must keep it leaning on the wall, not lay it flat or push it away
+    scene = make_scene(tmp_path, degrade(lean_specs(25.0), seed, trans=0.01, rot_deg=1.0))
+    g, out, rec = _ground_with_topology(tmp_path, scene)
+    assert "wall" in g.parents("plank") and rec["objects"]["plank"]["settled"] is True
+    tilt_before, tilt_after = _tilt_deg(scene.get("plank").pose), _tilt_deg(out.get("plank").pose)
+    assert abs(tilt_after - tilt_before) < 3.0 and tilt_after > 15.0
+    plank, wall = out.get("plank").world_mesh(), out.get("wall").world_mesh()
+    from phiscene.sdf import signed_distance
+
+    gap = signed_distance(wall, plank.vertices).min()  # the plank's top edge against the wall face
+    assert -1e-3 < gap < 6e-3  # touching (within the SDF clearance eps and settling), not penetrating
+    assert plank.bounds[0, 2] == pytest.approx(0.0, abs=2e-3)  # and standing on the ground
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_bridge_keeps_two_parents_after_assembly(tmp_path, seed):
+    scene = make_scene(tmp_path, degrade(bridge_specs(), seed, trans=0.01, rot_deg=1.0))
+    g, out, rec = _ground_with_topology(tmp_path, scene)
+    assert sorted(g.parents("plank")) == ["left", "right"] and g.order[-1] == "plank"
+    assert all(r["settled"] for r in rec["objects"].values())
+    plank = out.get("plank").world_mesh()
+    tops = [out.get(s).world_mesh().bounds[1, 2] for s in ("left", "right")]
+    # the plank rests on both supports: its bottom is at the higher support top, and it stays level
+    assert plank.bounds[0, 2] == pytest.approx(max(tops), abs=2e-3)
+    assert _tilt_deg(out.get("plank").pose) < 1.0

@@ -3,6 +3,10 @@
     phiscene ground SCENE_DIR OUT_DIR [--topology geometric|height|given] [--config config/config.yaml]
     phiscene metrics SCENE_JSON [--config ...]
     phiscene bench OUT_DIR [--suite contact] [--index 0] [--config ...]
+    phiscene failures [RESULTS_DIR] [--why]
+    phiscene import-sam3d IN_DIR OUT_DIR [--floor NX NY NZ D] [--unit-scale 1]
+    phiscene import-front3d ROOT OUT_DIR [--room SCENE_ID ...] [--test-rooms 1000] [--initial PATTERN]
+    phiscene export SCENE_JSON OUT_DIR [--proxies P.npz] [--topology T.json] [--no-check] [--demo]
 
 Settings come from a workflow config file (``--config``; default
 ``config/config.yaml`` if present in the working directory, else built-in defaults).
@@ -90,6 +94,80 @@ def cmd_bench(args: argparse.Namespace) -> None:
     print(f"wrote {args.out_dir}")
 
 
+def cmd_export(args: argparse.Namespace) -> None:
+    from phiscene import pipeline
+    from phiscene.io.export import FILES, run_export
+
+    cfg = _config(args.config)
+    scene = _scene_file(Path(args.scene))
+    out = Path(args.out_dir)
+    cache = Path(args.cache_dir or cfg.get("cache_dir", out / ".cache"))
+    proxies = Path(args.proxies) if args.proxies else out / "proxies.npz"
+    if not args.proxies:
+        print(f"[1/3] proxies for {scene}", flush=True)
+        pipeline.run_proxies(scene, proxies, cfg.get("proxies", {}), cache)
+    topology = Path(args.topology) if args.topology else out / "topology.json"
+    if not args.topology:
+        print("[2/3] support graph (geometric)", flush=True)
+        pipeline.run_topology(scene, topology, "geometric", cfg.get("topology", {}).get("geometric", {}))
+    print("[3/3] export (GLB, URDF, MJCF, support graph)" + ("" if args.no_check else " + round-trip check"),
+          flush=True)
+    metrics = cfg.get("metrics", {})
+    manifest = run_export(scene, proxies, out, cfg.get("sim", {}), metrics.get("mujoco", {}), topology,
+                          None if args.no_check else metrics.get("physical", {}), cache)
+    for name in ("glb", "urdf_index", "mjcf", "support_graph"):
+        print(f"wrote {out / manifest['files'][name]}")
+    if not args.no_check:
+        check = json.loads((out / "roundtrip.json").read_text())
+        for engine in ("pybullet", "mujoco"):
+            c = check[engine]
+            print(f"round trip {engine}: max drift difference {c['max_diff_trans'] * 1000:.3f} mm / "
+                  f"{c['max_diff_rot']:.3f} deg ({'ok' if c['ok'] else 'OUTSIDE 2 mm / 1 deg'})")
+    if args.demo:
+        from phiscene.demo import run_demo
+
+        summary = run_demo(out / FILES["urdf_index"], out / "demo.gif", out / "demo.json",
+                           cfg.get("export", {}).get("demo", {}), cfg.get("benchmark", {}).get("render", {}))
+        print(f"wrote {out / 'demo.gif'} ({summary['frames']} frames)")
+
+
+def cmd_failures(args: argparse.Namespace) -> None:
+    from phiscene.failures import find_failures, read_failure
+
+    for path in find_failures(args.results):
+        if args.why:
+            rec = read_failure(path) or {}
+            print(f"{path}: {rec.get('failed_in', '?')}: {rec.get('error', '?')}")
+        else:
+            print(path)
+
+
+def cmd_import_sam3d(args: argparse.Namespace) -> None:
+    from phiscene.io.sam3d import Sam3dParams, import_sam3d, make_floor
+
+    floor = make_floor(args.floor[:3], args.floor[3], "--floor") if args.floor else None
+    scene = import_sam3d(args.in_dir, args.out_dir, floor, Sam3dParams(unit_scale=args.unit_scale))
+    print(f"wrote {Path(args.out_dir) / 'initial' / 'scene.json'} ({len(scene)} objects, floor "
+          f"{scene.meta['floor']['from']})")
+
+
+def cmd_import_front3d(args: argparse.Namespace) -> None:
+    from phiscene.io.front3d import Front3dParams, import_front3d_room, scene_id, select_rooms
+
+    source = {"root": args.root, "test_rooms": args.test_rooms, "max_rooms": args.max_rooms, "gt": args.gt,
+              "up": args.up, "initial": args.initial}
+    try:
+        params = Front3dParams.from_dict(source)
+    except ValueError as exc:
+        raise PhisceneError(str(exc)) from None
+    rooms = args.room or [scene_id(r) for _, r in select_rooms(params)]
+    for k, sid in enumerate(rooms):
+        rec = import_front3d_room(params, sid, Path(args.out_dir) / sid)
+        kept = sum(o["kept"] for o in rec["objects"])
+        print(f"[{k + 1}/{len(rooms)}] {rec['room']} -> {Path(args.out_dir) / sid} ({kept} of "
+              f"{len(rec['objects'])} objects)", flush=True)
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="phiscene", description=__doc__.split("\n\n")[0])
     ap.add_argument("-v", "--verbose", action="store_true", help="debug logging")
@@ -113,7 +191,43 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--index", type=int, default=0)
     b.set_defaults(func=cmd_bench)
 
-    for p in (g, m, b):
+    f = sub.add_parser("failures", help="list the failure records of scenes that failed in a workflow run")
+    f.add_argument("results", nargs="?", default="results", help="results folder (default: results)")
+    f.add_argument("--why", action="store_true", help="also print where each failure started and its error")
+    f.set_defaults(func=cmd_failures)
+
+    s3 = sub.add_parser("import-sam3d", help="import SAM 3D Objects outputs as OUT_DIR/initial/scene.json + "
+                                             "reference/ (README: Real inputs)")
+    s3.add_argument("in_dir", help="folder of per-object folders (<id>/pose.json + mesh.ply|mesh.obj|mesh.glb)")
+    s3.add_argument("out_dir")
+    s3.add_argument("--floor", nargs=4, type=float, metavar=("NX", "NY", "NZ", "D"),
+                    help="floor plane n.p + d = 0 in the PyTorch3D camera frame (default: IN_DIR/floor.json, "
+                         "else estimated)")
+    s3.add_argument("--unit-scale", type=float, default=1.0, help="multiply translations and scales (default 1)")
+    s3.set_defaults(func=cmd_import_sam3d)
+
+    f3 = sub.add_parser("import-front3d", help="import 3D-FRONT test rooms (MIDI-3D layout) as benchmark scenes")
+    f3.add_argument("root", help="MIDI-3D's 3D-FRONT folder (midi_room_ids.json, 3D-FRONT-RENDER, ...)")
+    f3.add_argument("out_dir", help="one sub-folder per room: gt/, initial/, reference/")
+    f3.add_argument("--room", action="append", help="scene id of a room to import (repeatable; default: all)")
+    f3.add_argument("--test-rooms", type=int, default=1000, help="the test set: the last N rooms (default 1000)")
+    f3.add_argument("--max-rooms", type=int, default=0, help="only the first N test rooms (default: all)")
+    f3.add_argument("--gt", default="auto", choices=["auto", "mesh", "points"])
+    f3.add_argument("--up", default="y", choices=["y", "z"], help="up axis of the normalised scene frame")
+    f3.add_argument("--initial", help="SAM 3D Objects output folder per room: a pattern with {scene}, {house}, "
+                                      "{room} (default: the initial scene is a copy of the GT)")
+    f3.set_defaults(func=cmd_import_front3d)
+
+    e = sub.add_parser("export", help="simulation-ready export of one scene (GLB, URDF, MJCF, support graph)")
+    e.add_argument("scene", help="scene.json or its folder (a settled scene)")
+    e.add_argument("out_dir", help="output folder")
+    e.add_argument("--proxies", help="convex proxies .npz of the scene (default: computed with the config's settings)")
+    e.add_argument("--topology", help="support graph JSON (default: inferred with the geometric backend)")
+    e.add_argument("--no-check", action="store_true", help="skip the round-trip release in pybullet and MuJoCo")
+    e.add_argument("--demo", action="store_true", help="also throw a ball into the export: OUT_DIR/demo.gif")
+    e.set_defaults(func=cmd_export)
+
+    for p in (g, m, b, e):
         p.add_argument("--config", help="workflow config YAML (default: config/config.yaml if present)")
         p.add_argument("--cache-dir", help="cache folder (default: the config's cache_dir)")
     return ap

@@ -6,7 +6,18 @@ from pathlib import Path
 
 
 class PhisceneError(Exception):
-    """Base class of every error phiscene raises on purpose."""
+    """Base class of every error phiscene raises on purpose.
+
+    Attributes
+    ----------
+    per_scene
+        Whether the error is about one scene's data (then a per-scene workflow job records it as a
+        failure record and the run goes on, see :mod:`phiscene.failures`) rather than about the setup
+        (a missing API key or package, an unreachable service: then the job fails). Subclasses for
+        setup problems set it to ``False``.
+    """
+
+    per_scene: bool = True
 
 
 class InputError(PhisceneError, ValueError):

@@ -62,7 +62,8 @@ def check_mesh(mesh: trimesh.Trimesh, path: str | Path | None = None) -> None:
     if len(mesh.faces) and (mesh.faces.max() >= len(v) or mesh.faces.min() < 0):
         raise InputError(path, None, "mesh faces index missing vertices")
     try:
-        hull_volume = float(mesh.convex_hull.volume)
+        with np.errstate(divide="ignore", invalid="ignore"):  # trimesh divides by a zero volume for flat input
+            hull_volume = float(mesh.convex_hull.volume)
     except Exception:  # qhull fails on flat or collinear input
         hull_volume = 0.0
     if hull_volume < TOL.min_volume:

@@ -5,8 +5,9 @@ object's unscaled local frame. Back ends: ``coacd`` (default, CoACD with
 decimation), ``vhacd`` (pybullet's V-HACD) and ``convex`` (one hull; fast,
 for tests and convex objects). Results are cached under
 ``<cache_dir>/proxies/<mesh hash>-<params hash>.npz`` with atomic writes, so
-parallel jobs can share the cache; a cache entry whose stored hashes do not
-match is rebuilt.
+parallel jobs can share the cache. Each entry also stores a hash of its own
+hull arrays; an entry that is unreadable, was built for another key, or
+whose content no longer matches its hash (a corrupted file) is rebuilt.
 """
 
 from __future__ import annotations
@@ -21,6 +22,8 @@ import numpy as np
 import trimesh
 
 from phiscene.atomic import atomic_path
+from phiscene.errors import InputError
+from phiscene.failures import raise_if_failed
 from phiscene.meshes import load_mesh, mesh_hash
 
 log = logging.getLogger(__name__)
@@ -178,7 +181,8 @@ def proxy_for_mesh(mesh_file: str | Path, params: ProxyParams, cache_dir: str | 
     """Proxies of the mesh in ``mesh_file``, from the cache or computed and cached.
 
     A cache entry is trusted only if its stored mesh hash and parameter hash
-    match; a corrupt or mismatched entry is recomputed.
+    match and its hulls still hash to the stored ``content_hash``; a corrupt
+    or mismatched entry is recomputed (and rewritten).
     """
     import time
 
@@ -192,7 +196,7 @@ def proxy_for_mesh(mesh_file: str | Path, params: ProxyParams, cache_dir: str | 
     hulls = decompose(mesh, params)
     ratio, outside = fidelity(mesh, hulls)
     proxy = Proxy(hulls=hulls, volume_ratio=ratio, max_outside=outside, seconds=time.perf_counter() - t0,
-                  meta={"mesh_hash": mh, "params_hash": ph})
+                  meta={"mesh_hash": mh, "params_hash": ph, "content_hash": hulls_hash(hulls)})
     write_proxies(path, {"_": proxy})
     return proxy
 
@@ -208,7 +212,26 @@ def _read_entry(path: Path, mh: str, ph: str) -> Proxy | None:
     if got.meta.get("mesh_hash") != mh or got.meta.get("params_hash") != ph:
         log.warning("proxy cache entry %s does not match its key; rebuilding", path)
         return None
+    if got.meta.get("content_hash") != hulls_hash(got.hulls):
+        log.warning("proxy cache entry %s does not match its content hash (corrupted); rebuilding", path)
+        return None
     return got
+
+
+def hulls_hash(hulls: list[np.ndarray]) -> str:
+    """Hash of a proxy set's arrays (shapes and float64 values), 16 hex digits.
+
+    Parameters
+    ----------
+    hulls
+        Each ``(v, 3)`` float vertices of one convex piece.
+    """
+    h = hashlib.sha256()
+    for v in hulls:
+        a = np.ascontiguousarray(v, dtype=np.float64)
+        h.update(np.asarray(a.shape, dtype=np.int64).tobytes())
+        h.update(a.tobytes())
+    return h.hexdigest()[:16]
 
 
 def write_proxies(path: str | Path, proxies: dict[str, Proxy]) -> None:
@@ -227,14 +250,29 @@ def write_proxies(path: str | Path, proxies: dict[str, Proxy]) -> None:
 
 
 def read_proxies(path: str | Path) -> dict[str, Proxy]:
-    """Read the named proxy sets written by :func:`write_proxies`."""
-    with np.load(path, allow_pickle=False) as z:
-        index = json.loads(bytes(z["__index__"]).decode())
-        out = {}
-        for name, info in index.items():
-            hulls = [z[f"{name}/{k}"] for k in range(info["n"])]
-            out[name] = Proxy(hulls=hulls, volume_ratio=info["volume_ratio"], max_outside=info["max_outside"],
-                              seconds=info.get("seconds", 0.0), meta=info.get("meta", {}))
+    """Read the named proxy sets written by :func:`write_proxies`.
+
+    Raises
+    ------
+    InputError
+        Missing, truncated or otherwise unreadable file.
+    phiscene.failures.FailedInput
+        The file is a failure record (the proxies job failed on this scene).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, None, "proxies file not found")
+    raise_if_failed(path)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            index = json.loads(bytes(z["__index__"]).decode())
+            out = {}
+            for name, info in index.items():
+                hulls = [z[f"{name}/{k}"] for k in range(info["n"])]
+                out[name] = Proxy(hulls=hulls, volume_ratio=info["volume_ratio"], max_outside=info["max_outside"],
+                                  seconds=info.get("seconds", 0.0), meta=info.get("meta", {}))
+    except Exception as exc:  # numpy and zipfile raise many types for a damaged archive
+        raise InputError(path, None, f"not a readable proxies file ({type(exc).__name__}: {str(exc)[:120]})") from None
     return out
 
 

@@ -8,7 +8,7 @@ import os
 import sys
 import time
 from pathlib import Path
-from typing import Iterator
+from typing import Iterable, Iterator
 
 from phiscene.errors import PhisceneError
 
@@ -52,12 +52,34 @@ def setup_logging(log_file: str | Path | None = None, level: int = logging.INFO)
 
 
 @contextlib.contextmanager
-def job(name: str, log_file: str | Path | None = None, threads: int = 1) -> Iterator[logging.Logger]:
+def job(name: str, log_file: str | Path | None = None, threads: int = 1,
+        failure_outputs: Iterable[str | Path] | None = None) -> Iterator[logging.Logger]:
     """Run one workflow job: set up logging and threads, time it, turn phiscene errors into one line.
 
-    A :class:`~phiscene.errors.PhisceneError` is logged as a single line and the
-    process exits with status 1 (no traceback from inside a library); any
-    other exception propagates with its traceback, since it is a bug.
+    A :class:`~phiscene.errors.PhisceneError` (bad scene data, or an input
+    that is already a failure record) is logged as a single line, no
+    traceback from inside a library. What happens next depends on
+    ``failure_outputs``:
+
+    * given (per-scene jobs): a failure record (:mod:`phiscene.failures`) is
+      written atomically to each of these outputs and the job succeeds, so
+      the rest of the workflow and the tables go on, with this scene counted
+      as failed;
+    * omitted, or the error is a setup problem (``exc.per_scene`` is false): the
+      process exits with status 1.
+
+    Any other exception propagates with its traceback, since it is a bug.
+
+    Parameters
+    ----------
+    name
+        Job name for the log (and the failure record).
+    log_file
+        Log file (overwritten); stderr only when omitted.
+    threads
+        Thread budget (see :func:`set_threads`).
+    failure_outputs
+        The job's outputs, to hold failure records if the scene fails.
     """
     setup_logging(log_file)
     set_threads(threads)
@@ -66,7 +88,14 @@ def job(name: str, log_file: str | Path | None = None, threads: int = 1) -> Iter
     try:
         yield log
     except PhisceneError as exc:
-        log.error("%s: %s", name, exc)
-        logging.shutdown()
-        raise SystemExit(1) from None
+        if failure_outputs is None or not exc.per_scene:
+            log.error("%s: %s", name, exc)
+            logging.shutdown()
+            raise SystemExit(1) from None
+        from phiscene.failures import record_for, write_failure
+
+        outputs = [str(p) for p in failure_outputs]
+        write_failure(outputs, record_for(name, exc))
+        log.error("%s: FAILED (recorded in %s): %s", name, ", ".join(outputs), exc)
+        return
     log.info("%s: done in %.2f s", name, time.perf_counter() - t0)

@@ -169,9 +169,13 @@ def load_scene(path: str | Path, check_meshes: bool = True) -> Scene:
     Raises
     ------
     InputError
-        Naming the file and field of the first problem: schema violations,
-        unknown format version, non-rigid or non-finite poses, duplicate ids,
-        missing or unusable mesh files, coordinates far beyond any room.
+        Naming the file and field of the first problem: schema violations
+        (an empty ``objects`` list included), unknown format version, a
+        non-finite ground height, non-rigid or non-finite poses, duplicate ids,
+        missing or unusable mesh files, and (with ``check_meshes``) objects
+        that reach beyond ``TOL.max_coordinate`` from the origin, are larger
+        than ``TOL.max_object_size`` (a scene not in metres) or lie more than
+        ``TOL.max_below_ground`` below the ground.
     """
     path = Path(path)
     data = schemas.read_json(path)
@@ -179,6 +183,9 @@ def load_scene(path: str | Path, check_meshes: bool = True) -> Scene:
         raise InputError(path, "format", "missing; expected 'phiscene.scene/1'")
     schemas.validate(data, "scene", path)
     root = path.parent
+    ground = float(data.get("ground", {}).get("height", 0.0))
+    if not np.isfinite(ground):
+        raise InputError(path, "ground.height", f"must be finite, got {ground}")
     seen: set[str] = set()
     objects = []
     for i, d in enumerate(data["objects"]):
@@ -200,14 +207,41 @@ def load_scene(path: str | Path, check_meshes: bool = True) -> Scene:
         objects.append(SceneObject(id=d["id"], mesh_path=mesh_path, pose=pose, description=d.get("description", ""),
                                    color=color, meta=d.get("meta", {})))
     camera = data.get("camera")
-    scene = Scene(objects=objects, ground_height=float(data.get("ground", {}).get("height", 0.0)),
+    scene = Scene(objects=objects, ground_height=ground,
                   camera=(root / camera).resolve() if camera else None, meta=data.get("meta", {}), source=path)
     if check_meshes:
         from phiscene.meshes import load_mesh
 
         for i, o in enumerate(objects):
             try:
-                load_mesh(o.mesh_path)
+                mesh = load_mesh(o.mesh_path)
             except InputError as exc:
                 raise InputError(path, f"objects[{i}].mesh", exc.problem) from None
+            _check_placement(path, i, o, mesh.bounds, ground)
     return scene
+
+
+def _check_placement(path: Path, index: int, obj: SceneObject, local_bounds: np.ndarray, ground: float) -> None:
+    """Refuse an object whose world bounding box is implausible for a scene in metres above its ground.
+
+    Parameters
+    ----------
+    local_bounds : (2, 3) float
+        The mesh's local axis-aligned bounds.
+    """
+    import trimesh
+
+    world = transform_points(obj.pose, trimesh.bounds.corners(local_bounds))
+    lo, hi = world.min(axis=0), world.max(axis=0)
+    size = float((hi - lo).max())
+    where = f"objects[{index}]"
+    if size > TOL.max_object_size:
+        raise InputError(path, where, f"object is {size:.4g} m across (more than {TOL.max_object_size} m): "
+                         "units must be metres (is the scene in millimetres?)")
+    reach = float(np.abs(np.concatenate([lo, hi])).max())
+    if reach > TOL.max_coordinate:
+        raise InputError(path, f"{where}.pose", f"object reaches {reach:.4g} m from the origin (more than "
+                         f"{TOL.max_coordinate} m; units must be metres)")
+    if hi[2] < ground - TOL.max_below_ground:
+        raise InputError(path, f"{where}.pose", f"object lies {ground - hi[2]:.4g} m below the ground (top at "
+                         f"z={hi[2]:.4g} m, ground at {ground:.4g} m; at most {TOL.max_below_ground} m is accepted)")

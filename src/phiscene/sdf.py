@@ -325,7 +325,8 @@ class SignedDistance:
     """
 
     def __init__(self, mesh: trimesh.Trimesh, params: WindingParams = WindingParams()):
-        import open3d as o3d
+        from phiscene.o3d import open3d
+        o3d = open3d()
 
         vertices = np.asarray(mesh.vertices, dtype=float)
         faces = np.asarray(mesh.faces, dtype=np.int64)
@@ -343,7 +344,8 @@ class SignedDistance:
 
     def unsigned(self, points: np.ndarray) -> np.ndarray:
         """Distance to the nearest triangle, (n, 3) -> (n,) float (float64-exact given the nearest triangle)."""
-        import open3d as o3d
+        from phiscene.o3d import open3d
+        o3d = open3d()
 
         q = _check_points(points) - self.origin
         if len(q) == 0:

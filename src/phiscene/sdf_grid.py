@@ -25,8 +25,8 @@ Measured errors near the surface are stored with every grid
 
 Grids are cached in memory and on disk under
 ``<cache_dir>/sdf_grids/<mesh hash>-<params hash>.npz`` (atomic writes; the
-stored hashes are checked on read and a corrupt or mismatched entry is
-rebuilt).
+stored key hashes and a hash of the stored arrays are checked on read, and
+an unreadable, mismatched or corrupted entry is rebuilt).
 """
 
 from __future__ import annotations
@@ -350,10 +350,20 @@ def clear_memory_cache() -> None:
     _MEMORY.clear()
 
 
+def grid_content_hash(values: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> str:
+    """Hash of a grid's arrays (shape and float64 values of ``values``, ``lo``, ``hi``), 16 hex digits."""
+    h = hashlib.sha256()
+    for a in (values, lo, hi):
+        a = np.ascontiguousarray(a, dtype=np.float64)
+        h.update(np.asarray(a.shape, dtype=np.int64).tobytes())
+        h.update(a.tobytes())
+    return h.hexdigest()[:16]
+
+
 def write_grid(path: str | Path, grid: SdfGrid) -> None:
-    """Write a grid to ``.npz`` atomically."""
+    """Write a grid to ``.npz`` atomically, with a hash of its arrays for :func:`read_grid` to check."""
     meta = {"mesh_hash": grid.mesh_hash, "params_hash": grid.params_hash, "error": grid.error,
-            "version": SDF_GRID_VERSION}
+            "version": SDF_GRID_VERSION, "content_hash": grid_content_hash(grid.values, grid.lo, grid.hi)}
     with atomic_path(path, suffix=".npz") as tmp:
         with open(tmp, "wb") as fh:
             np.savez_compressed(fh, values=grid.values, lo=grid.lo, hi=grid.hi,
@@ -361,7 +371,10 @@ def write_grid(path: str | Path, grid: SdfGrid) -> None:
 
 
 def read_grid(path: str | Path, mesh_hash_: str, params_hash: str) -> SdfGrid | None:
-    """Read a cached grid; ``None`` (with a warning) if missing, unreadable or not built for these keys."""
+    """Read a cached grid; ``None`` (with a warning) if missing, unreadable, not built for these keys or corrupted.
+
+    An entry is corrupted when its arrays no longer hash to the stored ``content_hash``.
+    """
     path = Path(path)
     if not path.exists():
         return None
@@ -376,6 +389,9 @@ def read_grid(path: str | Path, mesh_hash_: str, params_hash: str) -> SdfGrid | 
         return None
     if meta.get("mesh_hash") != mesh_hash_ or meta.get("params_hash") != params_hash:
         log.warning("SDF grid cache entry %s does not match its key; rebuilding", path)
+        return None
+    if meta.get("content_hash") != grid_content_hash(values, lo, hi):
+        log.warning("SDF grid cache entry %s does not match its content hash (corrupted); rebuilding", path)
         return None
     return SdfGrid(values=values.astype(np.float64), lo=lo.astype(float), hi=hi.astype(float),
                    mesh_hash=mesh_hash_, params_hash=params_hash, error=meta.get("error", {}))

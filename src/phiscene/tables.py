@@ -1,9 +1,20 @@
 """Aggregation of per-scene metric files into the paper's tables (CSV + Markdown).
 
 Every table has one row per method (or backend), metric columns averaged
-over scenes, ``n_scenes``, and the paper's average rank (``avg_rank``: each
-metric ranks the rows, 1 = best, ties share the better rank; the ranks are
-averaged over the metric columns).
+over scenes, ``n_scenes``, ``n_failed`` and the paper's average rank
+(``avg_rank``: each metric ranks the rows, 1 = best, ties share the better
+rank; the ranks are averaged over the metric columns).
+
+Failed scenes. A per-scene metric file may be a failure record
+(:mod:`phiscene.failures`): the method, or a stage before it, could not
+process that scene. Such a scene is never dropped silently: ``n_scenes``
+counts every scene of the suite, ``n_failed`` the failed ones, and the metric
+columns are means over the ``n_scenes - n_failed`` scenes that succeeded
+(NaN when none did). A table that joins two metric sources (cross-simulator,
+ablation) counts a scene as failed when either source failed on it and
+averages both over the same remaining scenes. In the Markdown, a row with
+failures is marked with a dagger and a footnote says how many scenes its
+means leave out, since they are then not comparable with the other rows.
 """
 
 from __future__ import annotations
@@ -15,6 +26,7 @@ import numpy as np
 import pandas as pd
 
 from phiscene.atomic import write_text
+from phiscene.failures import is_failure_record
 
 #: Physical table columns and whether lower is better.
 PHYS_COLUMNS = {"pen_depth": "min", "float_dist": "min", "drift_trans": "min", "drift_rot": "min"}
@@ -40,15 +52,43 @@ def average_rank(df: pd.DataFrame, directions: dict[str, str]) -> pd.Series:
     return pd.concat(ranks, axis=1).mean(axis=1)
 
 
-def mean_table(files: dict[str, list[str | Path]], keys: list[str], suffix: str = "") -> pd.DataFrame:
-    """Per row name, the mean over its per-scene JSON files of each key (columns ``key + suffix``, plus ``n_scenes``)."""
+def failed_scenes(files: dict[str, list[str | Path]]) -> dict[str, set[int]]:
+    """Per row name, the positions of its per-scene files that are failure records."""
+    return {name: {i for i, p in enumerate(paths) if is_failure_record(_read(p))} for name, paths in files.items()}
+
+
+def _union(*failed: dict[str, set[int]]) -> dict[str, set[int]]:
+    names = set().union(*failed)
+    return {n: set().union(*(f.get(n, set()) for f in failed)) for n in names}
+
+
+def mean_table(files: dict[str, list[str | Path]], keys: list[str], suffix: str = "",
+               failed: dict[str, set[int]] | None = None) -> pd.DataFrame:
+    """Per row name, the mean over its successful scenes of each key.
+
+    Parameters
+    ----------
+    files
+        Row name -> per-scene metric JSON files (failure records allowed).
+    keys
+        Metric keys to average (columns ``key + suffix``).
+    failed
+        Row name -> positions of scenes to count as failed (defaults to :func:`failed_scenes` of ``files``).
+
+    Returns
+    -------
+    One row per name: the means, ``n_scenes`` (all scenes) and ``n_failed``.
+    """
+    failed = failed_scenes(files) if failed is None else failed
     rows = []
     for name, paths in files.items():
-        vals = [_read(p) for p in paths]
+        bad = failed.get(name, set())
+        vals = [_read(p) for i, p in enumerate(paths) if i not in bad]
         row = {"method": name}
         for k in keys:
             row[k + suffix] = float(np.mean([v[k] for v in vals])) if vals else float("nan")
-        row["n_scenes"] = len(vals)
+        row["n_scenes"] = len(paths)
+        row["n_failed"] = len(bad)
         rows.append(row)
     return pd.DataFrame(rows).set_index("method")
 
@@ -69,18 +109,20 @@ def physical_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
 def crosssim_table(bullet: dict[str, list[str | Path]], mujoco: dict[str, list[str | Path]]) -> pd.DataFrame:
     """Tab. 3: post-simulation drift in MuJoCo (ranked) beside the same protocol in pybullet."""
     keys = ["drift_trans", "drift_rot"]
-    mj = mean_table(mujoco, keys, "_mujoco")
-    pb = mean_table(bullet, keys, "_bullet").drop(columns="n_scenes")
-    df = mj.join(pb)[[*CROSSSIM_COLUMNS, "drift_trans_bullet", "drift_rot_bullet", "n_scenes"]]
+    failed = _union(failed_scenes(mujoco), failed_scenes(bullet))
+    mj = mean_table(mujoco, keys, "_mujoco", failed)
+    pb = mean_table(bullet, keys, "_bullet", failed).drop(columns=["n_scenes", "n_failed"])
+    df = mj.join(pb)[[*CROSSSIM_COLUMNS, "drift_trans_bullet", "drift_rot_bullet", "n_scenes", "n_failed"]]
     df["avg_rank"] = average_rank(df, CROSSSIM_COLUMNS)
     return df
 
 
 def ablation_table(physical: dict[str, list[str | Path]], alignment: dict[str, list[str | Path]]) -> pd.DataFrame:
     """Tab. 6: reference alignment (mean per-object mask IoU) and physical metrics per method, with pose change."""
-    align = mean_table(alignment, ["mask_iou", "pose_change_trans", "pose_change_rot"]).drop(columns="n_scenes")
-    df = align.join(mean_table(physical, list(PHYS_COLUMNS)))
-    df = df[[*ABLATION_COLUMNS, "pose_change_trans", "pose_change_rot", "n_scenes"]]
+    failed = _union(failed_scenes(physical), failed_scenes(alignment))
+    align = mean_table(alignment, ["mask_iou", "pose_change_trans", "pose_change_rot"], failed=failed)
+    df = align.drop(columns=["n_scenes", "n_failed"]).join(mean_table(physical, list(PHYS_COLUMNS), failed=failed))
+    df = df[[*ABLATION_COLUMNS, "pose_change_trans", "pose_change_rot", "n_scenes", "n_failed"]]
     df["avg_rank"] = average_rank(df, ABLATION_COLUMNS)
     return df
 
@@ -117,10 +159,14 @@ def runtime_table(benchmark_dir: str | Path) -> pd.DataFrame:
 
 
 def topology_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
-    """Tab. 7: per backend the micro-averaged edge precision, recall and F1 (plus the macro F1 over scenes)."""
+    """Tab. 7: per backend the micro-averaged edge precision, recall and F1 (plus the macro F1 over scenes).
+
+    Failed scenes are counted in ``n_failed`` and left out of the sums (see the module notes).
+    """
     rows = []
     for backend, paths in files.items():
-        vals = [_read(p) for p in paths]
+        records = [_read(p) for p in paths]
+        vals = [v for v in records if not is_failure_record(v)]
         tp = sum(v["tp"] for v in vals)
         fp = sum(v["fp"] for v in vals)
         fn = sum(v["fn"] for v in vals)
@@ -129,7 +175,7 @@ def topology_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
         f1 = 2 * p * r / (p + r) if p + r else 0.0
         rows.append({"backend": backend, "precision": p, "recall": r, "f1": f1,
                      "f1_macro": float(np.mean([v["f1"] for v in vals])) if vals else float("nan"),
-                     "tp": tp, "fp": fp, "fn": fn, "n_scenes": len(vals)})
+                     "tp": tp, "fp": fp, "fn": fn, "n_scenes": len(records), "n_failed": len(records) - len(vals)})
     df = pd.DataFrame(rows).set_index("backend")
     df["avg_rank"] = average_rank(df, TOPO_COLUMNS)
     return df
@@ -144,22 +190,80 @@ def _fmt(v: float, digits: int) -> str:
     return f"{v:.{digits}f}"
 
 
-def to_markdown(df: pd.DataFrame, directions: dict[str, str], digits: int = 4) -> str:
-    """Markdown table: floats like the paper, the best value of each ranked metric bold, the second underlined."""
-    shown = df.copy().astype(object)
+def marked_cells(df: pd.DataFrame, directions: dict[str, str], digits: int = 4) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Cell texts of a table and the best / second mark of each cell.
+
+    Float columns are formatted like the paper (:func:`_fmt`); other columns are shown as they are.
+    Each column of ``directions`` and ``avg_rank`` (lower is better) ranks the rows (ties share the better rank).
+
+    Returns
+    -------
+    texts : DataFrame of str, same index and columns as ``df``
+    marks : DataFrame of int, same shape: 1 = best, 2 = second, 0 = neither or an unranked column
+    """
+    texts = df.copy().astype(object)
+    marks = pd.DataFrame(0, index=df.index, columns=df.columns)
     ranked = {**directions, "avg_rank": "min"}
     for c in df.columns:
         if not pd.api.types.is_float_dtype(df[c]):
+            texts[c] = [str(v) for v in df[c]]
             continue
         order = df[c].rank(method="min", ascending=(ranked.get(c) == "min")) if c in ranked else None
         for idx in df.index:
-            s = _fmt(df.at[idx, c], digits)
-            if order is not None and order[idx] == 1:
-                s = f"**{s}**"
-            elif order is not None and order[idx] == 2:
-                s = f"<u>{s}</u>"
-            shown.at[idx, c] = s
-    return shown.to_markdown() + "\n"
+            texts.at[idx, c] = _fmt(df.at[idx, c], digits)
+            if order is not None and order[idx] in (1, 2):
+                marks.at[idx, c] = int(order[idx])
+    return texts, marks
+
+
+def to_markdown(df: pd.DataFrame, directions: dict[str, str], digits: int = 4) -> str:
+    """Markdown table: floats like the paper, the best value of each ranked metric bold, the second underlined."""
+    texts, marks = marked_cells(df, directions, digits)
+    shown = texts.where(marks != 1, "**" + texts + "**").where(marks != 2, "<u>" + texts + "</u>")
+    return _flag_failures(shown, df).to_markdown() + "\n" + failure_note(df)
+
+
+def _flag_failures(shown: pd.DataFrame, df: pd.DataFrame) -> pd.DataFrame:
+    """``shown`` with a dagger after the name of every row of ``df`` that has failed scenes."""
+    if "n_failed" not in df.columns:
+        return shown
+    out = shown.copy()
+    out.index = pd.Index([f"{i} †" if n > 0 else i for i, n in zip(df.index, df["n_failed"])], name=df.index.name)
+    return out
+
+
+def failure_note(df: pd.DataFrame) -> str:
+    """Footnote for the rows of ``df`` with ``n_failed > 0`` ('' when there are none)."""
+    if "n_failed" not in df.columns or not (df["n_failed"] > 0).any():
+        return ""
+    bad = df.index[df["n_failed"] > 0]
+    parts = "; ".join(f"{i}: {int(df.at[i, 'n_failed'])} of {int(df.at[i, 'n_scenes'])}" for i in bad)
+    return (f"\n† Failed scenes ({parts}): these rows average only the scenes that succeeded, so they are "
+            "not directly comparable with the other rows.\n")
+
+
+def to_html(df: pd.DataFrame, directions: dict[str, str], digits: int = 4) -> str:
+    """HTML ``<table>`` of :func:`to_markdown`'s content: best value bold (``<b>``), second underlined (``<u>``).
+
+    Ranked columns carry ``class="ranked"`` on their header cell; names and values are HTML-escaped.
+    """
+    import html
+
+    texts, marks = marked_cells(df, directions, digits)
+    ranked = {**directions, "avg_rank": "min"}
+    head = "".join(f'<th{" class=ranked" if c in ranked else ""}>{html.escape(str(c))}'
+                   f'{" ↓" if ranked.get(c) == "min" else " ↑" if c in ranked else ""}</th>' for c in df.columns)
+    rows = []
+    for idx in df.index:
+        cells = []
+        for c in df.columns:
+            t = html.escape(texts.at[idx, c])
+            m = marks.at[idx, c]
+            cells.append(f"<td>{'<b>' + t + '</b>' if m == 1 else '<u>' + t + '</u>' if m == 2 else t}</td>")
+        rows.append(f"<tr><th>{html.escape(str(idx))}</th>{''.join(cells)}</tr>")
+    name = html.escape(str(df.index.name or ""))
+    return (f"<table>\n<thead><tr><th>{name}</th>{head}</tr></thead>\n<tbody>\n" + "\n".join(rows)
+            + "\n</tbody>\n</table>\n")
 
 
 def write_table(df: pd.DataFrame, csv_path: str | Path, md_path: str | Path, title: str,

@@ -24,7 +24,16 @@ class Tolerances:
     winding_inside
         Generalised winding number above which a point is inside a mesh.
     max_coordinate
-        Largest accepted absolute world coordinate (m); farther is refused as a unit error.
+        Largest accepted absolute world coordinate (m) of an object's pose and of its
+        world bounding box; farther is refused as a unit error (the simulators' ground
+        box spans 100 m x 100 m around the origin, see ``phiscene.sim.bullet``).
+    max_object_size
+        Largest accepted extent (m) of one object's world bounding box; larger is
+        refused as a unit error (e.g. a scene written in millimetres).
+    max_below_ground
+        Deepest accepted position (m) of an object's top below the ground plane;
+        an object buried deeper is refused (a sign or unit error, beyond what
+        grounding can lift).
     sdf_aabb_pad
         Padding of a mesh's bounding box, as a fraction of its diagonal, inside which
         signed distance evaluates the winding number (points outside are outside).
@@ -38,7 +47,9 @@ class Tolerances:
     max_scale: float = 1e3
     min_volume: float = 1e-9
     winding_inside: float = 0.5
-    max_coordinate: float = 1e3
+    max_coordinate: float = 50.0
+    max_object_size: float = 50.0
+    max_below_ground: float = 1.0
     sdf_aabb_pad: float = 1e-6
     footprint_resolution: float = 1e-6
 

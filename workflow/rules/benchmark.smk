@@ -9,6 +9,8 @@ rule benchmark_scene:
         image="results/scenes/{suite}/{scene}/reference/image.png",
         segmentation="results/scenes/{suite}/{scene}/reference/segmentation.png",
         camera="results/scenes/{suite}/{scene}/reference/camera.json",
+    wildcard_constraints:
+        suite=alternation([s for s in config["suites"] if "source" not in config["suites"][s]]),
     params:
         index=scene_index,
         bench=lambda wc: {**config["benchmark"], **config["suites"][wc.suite].get("benchmark", {}),
@@ -20,7 +22,37 @@ rule benchmark_scene:
     benchmark:
         "results/benchmarks/benchmark/{suite}/{scene}.tsv"
     threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=30,
     conda:
         ENV
     script:
         "../scripts/benchmark_scene.py"
+
+
+rule front3d_scene:
+    # a suite with `source: {kind: front3d, root: ...}`: one 3D-FRONT test room in MIDI-3D's layout (phiscene.io.front3d)
+    output:
+        gt="results/scenes/{suite}/{scene}/gt/scene.json",
+        gt_topology="results/scenes/{suite}/{scene}/gt/topology.json",
+        initial="results/scenes/{suite}/{scene}/initial/scene.json",
+        image="results/scenes/{suite}/{scene}/reference/image.png",
+        segmentation="results/scenes/{suite}/{scene}/reference/segmentation.png",
+    wildcard_constraints:
+        suite=alternation([s for s in config["suites"] if "source" in config["suites"][s]]),
+    params:
+        source=lambda wc: config["suites"][wc.suite]["source"],
+        version=V.BENCHMARK,
+    log:
+        "results/logs/benchmark/{suite}/{scene}.log",
+    benchmark:
+        "results/benchmarks/benchmark/{suite}/{scene}.tsv"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=30,
+    conda:
+        ENV
+    script:
+        "../scripts/front3d_scene.py"

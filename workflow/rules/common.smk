@@ -8,10 +8,14 @@ ENV = os.path.join(workflow.basedir, "envs/phiscene.yaml")
 
 
 def scene_ids(suite):
-    """Scene ids of a suite: an explicit list, or scene_000 .. scene_{n-1}."""
+    """Scene ids of a suite: an explicit list, a real-data source's rooms, or scene_000 .. scene_{n-1}."""
     s = config["suites"][suite]
     if "scenes" in s:
         return list(s["scenes"])
+    if "source" in s:  # 3D-FRONT test rooms (phiscene.io.front3d), from the source's room list file
+        from phiscene.io.front3d import scene_ids as _front3d_scene_ids
+
+        return _front3d_scene_ids(s["source"])
     return [f"scene_{i:03d}" for i in range(s["n_scenes"])]
 
 

@@ -12,6 +12,9 @@ rule reference_method:
     log:
         "results/logs/methods/{method}/{suite}/{scene}.log",
     threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
     conda:
         ENV
     script:
@@ -38,6 +41,9 @@ rule phi_scene:
     benchmark:
         "results/benchmarks/methods/{method}/{suite}/{scene}.tsv"
     threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=30,
     conda:
         ENV
     script:

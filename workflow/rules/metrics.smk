@@ -17,6 +17,9 @@ rule physical_metrics:
     benchmark:
         "results/benchmarks/metrics/physical/{method}/{suite}/{scene}.tsv"
     threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=15,
     conda:
         ENV
     script:
@@ -34,6 +37,9 @@ rule topology_metrics:
     log:
         "results/logs/metrics/topology/{backend}/{suite}/{scene}.log",
     threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
     conda:
         ENV
     script:
@@ -56,6 +62,9 @@ rule mujoco_metrics:
     benchmark:
         "results/benchmarks/metrics/mujoco/{method}/{suite}/{scene}.tsv"
     threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=15,
     conda:
         ENV
     script:
@@ -76,6 +85,9 @@ rule recon_metrics:
     benchmark:
         "results/benchmarks/metrics/recon/{method}/{suite}/{scene}.tsv"
     threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=15,
     conda:
         ENV
     script:
@@ -99,6 +111,9 @@ rule alignment_metrics:
     benchmark:
         "results/benchmarks/metrics/alignment/{method}/{suite}/{scene}.tsv"
     threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=15,
     conda:
         ENV
     script:

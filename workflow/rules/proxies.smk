@@ -15,6 +15,9 @@ rule proxies:
     benchmark:
         "results/benchmarks/proxies/{suite}/{scene}.tsv"
     threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=30,
     conda:
         ENV
     script:

@@ -13,6 +13,9 @@ rule phys_table:
     log:
         "results/logs/tables/phys.log",
     threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
     conda:
         ENV
     script:
@@ -31,6 +34,9 @@ rule topology_table:
     log:
         "results/logs/tables/topology.log",
     threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
     conda:
         ENV
     script:
@@ -51,6 +57,9 @@ rule crosssim_table:
     log:
         "results/logs/tables/crosssim.log",
     threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
     conda:
         ENV
     script:
@@ -69,6 +78,9 @@ rule recon_table:
     log:
         "results/logs/tables/recon.log",
     threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
     conda:
         ENV
     script:
@@ -88,6 +100,9 @@ rule runtime_table:
     log:
         "results/logs/tables/runtime.log",
     threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
     conda:
         ENV
     script:
@@ -108,6 +123,9 @@ rule ablation_table:
     log:
         "results/logs/tables/ablation.log",
     threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
     conda:
         ENV
     script:

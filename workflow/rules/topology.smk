@@ -15,6 +15,9 @@ rule topology:
     benchmark:
         "results/benchmarks/topology/{backend}/{suite}/{scene}.tsv"
     threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=15,
     conda:
         ENV
     script:

@@ -4,5 +4,6 @@ from phiscene.pipeline import run_external
 from phiscene.runner import job
 
 sm = snakemake  # noqa: F821 (injected by Snakemake)
-with job(f"import {sm.wildcards.method} {sm.wildcards.suite}/{sm.wildcards.scene}", sm.log[0], sm.threads):
+with job(f"import {sm.wildcards.method} {sm.wildcards.suite}/{sm.wildcards.scene}", sm.log[0], sm.threads,
+         failure_outputs=sm.output):
     run_external(sm.input.prediction, sm.input.initial, sm.output.scene, sm.output.log_json, dict(sm.params.settings))

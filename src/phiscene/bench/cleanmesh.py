@@ -24,7 +24,8 @@ MAX_FACES = 2000
 
 def self_intersections(mesh: trimesh.Trimesh) -> int:
     """Number of intersecting triangle pairs that share no vertex (open3d's exact test)."""
-    import open3d as o3d
+    from phiscene.o3d import open3d
+    o3d = open3d()
 
     om = o3d.geometry.TriangleMesh(o3d.utility.Vector3dVector(np.asarray(mesh.vertices, dtype=float)),
                                    o3d.utility.Vector3iVector(np.asarray(mesh.faces, dtype=np.int32)))
@@ -80,7 +81,8 @@ def remesh_union(shells: list[trimesh.Trimesh], pitch: float) -> trimesh.Trimesh
         Grid spacing and target edge length (m).
     """
     import manifold3d
-    import open3d as o3d
+    from phiscene.o3d import open3d
+    o3d = open3d()
 
     lo = np.min([s.bounds[0] for s in shells], axis=0) - 2 * pitch
     hi = np.max([s.bounds[1] for s in shells], axis=0) + 2 * pitch

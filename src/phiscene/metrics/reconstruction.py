@@ -273,7 +273,8 @@ def icp(source: np.ndarray, target: np.ndarray, init: np.ndarray | None = None, 
     transform : (4, 4) float
         Rigid transform mapping ``source`` onto ``target`` (includes ``init``).
     """
-    import open3d as o3d
+    from phiscene.o3d import open3d
+    o3d = open3d()
 
     reg = o3d.pipelines.registration
     src, tgt = _as_points(source, "source"), _as_points(target, "target")

@@ -10,8 +10,10 @@ SupportGraph`` (with the order filled) plus a parameter dataclass with
     The paper's Z-topo baseline (order by mean vertex height).
 ``given``
     A topology file (e.g. the benchmark's ground truth), checked against the scene.
+``mllm``
+    A multimodal LLM (Gemini or any OpenAI-compatible endpoint) with the paper's prompts.
 
-A new backend (e.g. ``mllm``) plugs in with :func:`register_backend`.
+A new backend plugs in with :func:`register_backend`.
 """
 
 from __future__ import annotations
@@ -51,6 +53,7 @@ _BUILTIN = {
     "geometric": ("phiscene.topology.geometric", "infer", "GeometricParams", False),
     "height": ("phiscene.topology.height", "infer", "HeightParams", False),
     "given": ("phiscene.topology.given", "infer", "GivenParams", True),
+    "mllm": ("phiscene.topology.mllm", "infer", "MllmParams", False),
 }
 _REGISTRY: dict[str, Backend] = {}
 

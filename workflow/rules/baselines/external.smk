@@ -17,6 +17,9 @@ rule baseline_external:
     log:
         "results/logs/methods/{method}/{suite}/{scene}.log",
     threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=15,
     conda:
         ENV
     script:
@@ -38,6 +41,9 @@ rule method_proxies:
     log:
         "results/logs/proxies/{method}/{suite}/{scene}.log",
     threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=30,
     conda:
         ENV
     script:

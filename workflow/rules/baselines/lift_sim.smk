@@ -22,6 +22,9 @@ rule baseline_lift_sim:
     benchmark:
         "results/benchmarks/methods/{method}/{suite}/{scene}.tsv"
     threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=30,
     conda:
         ENV
     script:

@@ -1,0 +1,227 @@
+# The HTML report: `snakemake --report results/report.html` after the workflow has run.
+# Pages and figures it shows (rule all makes them all), captions in workflow/report/*.rst.
+# No benchmark: TSVs here: the runtime table (an input of the report) reads results/benchmarks/.
+#   front page      the paper's tables (results/report/tables.html, embedded by workflow/report/workflow.rst)
+#   Tables          one HTML page per table (best bold, second underlined, CSV + Markdown downloads)
+#   Figures         per-method bars per table, per-scene drift distributions (pybullet, MuJoCo)
+#   Scenes          per scene: before/after renders + support graph, an interactive offline 3D viewer
+#   Demo            the demo GIFs (results/demo/{suite}/{scene}.gif), when the workflow makes them
+
+
+report: "../report/workflow.rst"
+
+
+#: Tables the report shows (keys of phiscene.report.TABLES), in page order; the ones with a bar chart.
+REPORT_TABLES = ["phys", "crosssim", "recon", "topology", "ablation", "runtime"]
+BAR_TABLES = ["phys", "crosssim", "recon", "topology", "ablation"]
+#: Drift distributions: engine -> (per-scene metric, the table whose suite and methods it shows).
+DRIFT_FIGURES = {"pybullet": ("physical", "phys"), "mujoco": ("mujoco", "crosssim")}
+REPORT_METHOD = config["report"]["method"]
+if REPORT_METHOD not in config["methods"]:
+    raise ValueError(f"config: report.method: unknown method {REPORT_METHOD!r}; known: {sorted(config['methods'])}")
+
+
+def report_suites():
+    """Suites of the tables: every scene of these gets a picture and a 3D viewer in the report."""
+    return sorted({spec["suite"] for spec in config["tables"].values() if "suite" in spec})
+
+
+def report_topology(wildcards):
+    """The support graph drawn beside a scene: the one the report method used, else the ground truth's."""
+    backend = config["methods"][REPORT_METHOD].get("topology")
+    if backend is None:
+        return f"results/scenes/{wildcards.suite}/{wildcards.scene}/gt/topology.json"
+    return f"results/topology/{backend}/{wildcards.suite}/{wildcards.scene}.json"
+
+
+def demo_gifs():
+    """Demo GIFs the report shows: results/demo/{suite}/{scene}.gif of the scenes export.smk animates.
+
+    Hook for the demo animation (workflow/rules/export.smk): when that file defines `demo_scenes()`
+    returning (suite, scene) pairs, their GIFs join the report under "Demo"; until then there are none.
+    """
+    lister = globals().get("demo_scenes")
+    return [f"results/demo/{suite}/{scene}.gif" for suite, scene in (lister() if lister else [])]
+
+
+def report_targets():
+    """Every file the report shows (rule all asks for them, so `snakemake --report` finds them made)."""
+    out = ["results/report/tables.html"]
+    out += [f"results/report/tables/{t}.html" for t in REPORT_TABLES]
+    out += [f"results/report/figures/{t}_bars.png" for t in BAR_TABLES]
+    out += [f"results/report/figures/drift_{engine}.png" for engine in DRIFT_FIGURES]
+    for suite in report_suites():
+        out += expand("results/report/scenes/{suite}/{scene}.png", suite=suite, scene=scene_ids(suite))
+        out += expand("results/report/viewers/{suite}/{scene}.html", suite=suite, scene=scene_ids(suite))
+    out += [g.replace("results/demo/", "results/report/demo/").replace(".gif", ".html") for g in demo_gifs()]
+    return out
+
+
+def table_files(tables):
+    return {**{f"csv_{t}": f"results/tables/{t}.csv" for t in tables},
+            **{f"md_{t}": f"results/tables/{t}.md" for t in tables}}
+
+
+rule report_front_tables:
+    input:
+        unpack(lambda wc: table_files(REPORT_TABLES)),
+    output:
+        "results/report/tables.html",
+    params:
+        tables=REPORT_TABLES,
+        title="phiscene tables",
+        fragment=True,
+        version=V.REPORT,
+    log:
+        "results/logs/report/tables.log",
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
+    conda:
+        ENV
+    script:
+        "../scripts/report_tables.py"
+
+
+rule report_table:
+    input:
+        unpack(lambda wc: table_files([wc.table])),
+    output:
+        report("results/report/tables/{table}.html", caption="../report/table.rst", category="Tables",
+               labels={"table": "{table}"}),
+    wildcard_constraints:
+        table=alternation(REPORT_TABLES),
+    params:
+        tables=lambda wc: [wc.table],
+        title="{table} table",
+        fragment=False,
+        version=V.REPORT,
+    log:
+        "results/logs/report/tables/{table}.log",
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
+    conda:
+        ENV
+    script:
+        "../scripts/report_tables.py"
+
+
+rule report_bars:
+    input:
+        "results/tables/{table}.csv",
+    output:
+        report("results/report/figures/{table}_bars.png", caption="../report/bars.rst", category="Figures",
+               subcategory="Metrics per method", labels={"table": "{table}"}),
+    wildcard_constraints:
+        table=alternation(BAR_TABLES),
+    params:
+        table="{table}",
+        version=V.REPORT,
+    log:
+        "results/logs/report/bars/{table}.log",
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
+    conda:
+        ENV
+    script:
+        "../scripts/report_bars.py"
+
+
+rule report_drift:
+    input:
+        unpack(lambda wc: table_inputs(DRIFT_FIGURES[wc.engine][0], DRIFT_FIGURES[wc.engine][1],
+                                       config["tables"][DRIFT_FIGURES[wc.engine][1]]["methods"])),
+    output:
+        report("results/report/figures/drift_{engine}.png", caption="../report/drift.rst", category="Figures",
+               subcategory="Drift per scene", labels={"simulator": "{engine}"}),
+    wildcard_constraints:
+        engine=alternation(list(DRIFT_FIGURES)),
+    params:
+        methods=lambda wc: config["tables"][DRIFT_FIGURES[wc.engine][1]]["methods"],
+        seed=config["benchmark"]["seed"],
+        version=V.REPORT,
+    log:
+        "results/logs/report/drift_{engine}.log",
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
+    conda:
+        ENV
+    script:
+        "../scripts/report_drift.py"
+
+
+rule report_scene:
+    input:
+        initial="results/scenes/{suite}/{scene}/initial/scene.json",
+        method=f"results/methods/{REPORT_METHOD}/{{suite}}/{{scene}}/scene.json",
+        camera="results/scenes/{suite}/{scene}/reference/camera.json",
+        topology=report_topology,
+    output:
+        report("results/report/scenes/{suite}/{scene}.png", caption="../report/scene.rst", category="Scenes",
+               subcategory="{suite}", labels={"scene": "{scene}", "view": "renders + support graph"}),
+    params:
+        method=REPORT_METHOD,
+        title="{suite}/{scene}",
+        version=V.REPORT,
+    log:
+        "results/logs/report/scenes/{suite}/{scene}.log",
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
+    conda:
+        ENV
+    script:
+        "../scripts/report_scene.py"
+
+
+rule report_viewer:
+    input:
+        scene=f"results/methods/{REPORT_METHOD}/{{suite}}/{{scene}}/scene.json",
+    output:
+        report("results/report/viewers/{suite}/{scene}.html", caption="../report/viewer.rst", category="Scenes",
+               subcategory="{suite}", labels={"scene": "{scene}", "view": "3D viewer"}),
+    params:
+        method=REPORT_METHOD,
+        title=f"{{suite}}/{{scene}}: {REPORT_METHOD}",
+        color_by="rgb",
+        version=V.REPORT,
+    log:
+        "results/logs/report/viewers/{suite}/{scene}.log",
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
+    conda:
+        ENV
+    script:
+        "../scripts/report_viewer.py"
+
+
+rule report_demo:
+    input:
+        gif="results/demo/{suite}/{scene}.gif",
+        summary="results/demo/{suite}/{scene}.json",
+    output:
+        report("results/report/demo/{suite}/{scene}.html", caption="../report/demo.rst", category="Demo",
+               labels={"suite": "{suite}", "scene": "{scene}"}),
+    params:
+        title="{suite}/{scene}: a ball thrown into the settled scene",
+        version=V.REPORT,
+    log:
+        "results/logs/report/demo/{suite}/{scene}.log",
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
+    conda:
+        ENV
+    script:
+        "../scripts/report_demo.py"
