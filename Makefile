@@ -25,6 +25,7 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/default_run.py
 	$(BIN)/python benchmarks/method_speed.py
+	$(BIN)/python benchmarks/scaling.py
 
 env: $(STAMP)
 

@@ -85,7 +85,7 @@ def _job_stats(log: str) -> collections.Counter:
 def _resources(log: str) -> dict[str, tuple[str, str]]:
     """Rule -> (mem_mb, runtime) from the job descriptions Snakemake prints."""
     out = {}
-    for rule, body in re.findall(r"^rule (\w+):\n((?:    .*\n)+)", log, flags=re.M):
+    for rule, body in re.findall(r"^(?:local)?rule (\w+):\n((?:    .*\n)+)", log, flags=re.M):
         m = re.search(r"resources: (.*)", body)
         res = dict(kv.split("=", 1) for kv in m.group(1).split(", ")) if m else {}
         out[rule] = (res.get("mem_mb"), res.get("runtime"))

@@ -242,3 +242,17 @@ def test_corrupted_sdf_grid_cache_entry_is_rebuilt(tmp_path, caplog, damage):
     np.testing.assert_array_equal(again.values, build_grid(mesh, params).values)
     np.testing.assert_array_equal(again.values, built.values)
     clear_memory_cache()
+
+
+def test_damaged_hull_obj_is_rewritten(tmp_path, caplog):
+    from phiscene.sim.bullet import hulls_obj_file
+
+    hulls = [np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)]
+    path = hulls_obj_file(hulls, tmp_path)
+    good = path.read_bytes()
+    assert hulls_obj_file(hulls, tmp_path) == path  # same hulls, same file
+    path.write_bytes(good[: len(good) // 2])  # truncated by a crash
+    assert hulls_obj_file(hulls, tmp_path) == path and path.read_bytes() == good
+    assert "damaged" in caplog.text
+    other = hulls_obj_file([hulls[0] * 2], tmp_path)
+    assert other != path  # other vertices, other name (pybullet caches shapes by file name)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import base64
 import html
+import logging
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,9 +28,13 @@ from phiscene.atomic import atomic_path, write_text
 from phiscene.errors import InputError
 from phiscene.tables import ABLATION_COLUMNS, CROSSSIM_COLUMNS, PHYS_COLUMNS, RECON_COLUMNS, TOPO_COLUMNS
 
+log = logging.getLogger(__name__)
+
 #: Table columns that count things (shown as integers), besides every ``n_*`` column; every other numeric
 #: column is a float metric.
 COUNT_COLUMNS = frozenset({"tp", "fp", "fn", "jobs"})
+#: Largest HTML result (bytes) a single-file report shows in Chromium: base64 (4/3) must stay under 2 MiB.
+EMBED_LIMIT_BYTES = 1_500_000
 #: Gap (pixels) between and around the images of :func:`side_by_side`.
 PANEL_GAP_PX = 6
 
@@ -307,11 +312,20 @@ def scene_panel(initial_json: str | Path, method_json: str | Path, camera_json: 
 
 
 def scene_viewer(scene_json: str | Path, out_html: str | Path, title: str, color_by: str = "rgb") -> Path:
-    """Interactive offline 3D viewer page of one ``scene.json`` (see :func:`phiscene.viewer.scene_viewer_html`)."""
+    """Interactive offline 3D viewer page of one ``scene.json`` (see :func:`phiscene.viewer.scene_viewer_html`).
+
+    Logs a warning when the page is larger than :data:`EMBED_LIMIT_BYTES`: the single-file report
+    shows HTML results as base64 ``data:`` URLs, which Chromium refuses beyond 2 MiB (``--report *.zip`` does not).
+    """
     from phiscene.scene import load_scene
     from phiscene.viewer import scene_viewer_html
 
-    return scene_viewer_html(load_scene(scene_json), out_html, title, color_by=color_by)
+    out = scene_viewer_html(load_scene(scene_json), out_html, title, color_by=color_by)
+    size = out.stat().st_size
+    if size > EMBED_LIMIT_BYTES:
+        log.warning("%s: %.2f MB, too large to show inside a single-file report in Chromium (data: URLs > 2 MiB); "
+                    "use `snakemake --report results/report.zip`", out, size / 1e6)
+    return out
 
 
 def demo_caption(summary_json: str | Path) -> str:

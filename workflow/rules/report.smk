@@ -1,65 +1,18 @@
 # The HTML report: `snakemake --report results/report.html` after the workflow has run.
-# Pages and figures it shows (rule all makes them all), captions in workflow/report/*.rst.
-# No benchmark: TSVs here: the runtime table (an input of the report) reads results/benchmarks/.
+# Pages and figures it shows (rule all makes them all; helpers in report_common.smk, captions in
+# workflow/report/*.rst):
 #   front page      the paper's tables (results/report/tables.html, embedded by workflow/report/workflow.rst)
 #   Tables          one HTML page per table (best bold, second underlined, CSV + Markdown downloads)
 #   Figures         per-method bars per table, per-scene drift distributions (pybullet, MuJoCo)
 #   Scenes          per scene: before/after renders + support graph, an interactive offline 3D viewer
 #   Demo            the demo GIFs (results/demo/{suite}/{scene}.gif), when the workflow makes them
+# No benchmark: TSVs here: the runtime table (an input of the report) reads every TSV in results/benchmarks/.
 
 
 report: "../report/workflow.rst"
 
 
-#: Tables the report shows (keys of phiscene.report.TABLES), in page order; the ones with a bar chart.
-REPORT_TABLES = ["phys", "crosssim", "recon", "topology", "ablation", "runtime"]
-BAR_TABLES = ["phys", "crosssim", "recon", "topology", "ablation"]
-#: Drift distributions: engine -> (per-scene metric, the table whose suite and methods it shows).
-DRIFT_FIGURES = {"pybullet": ("physical", "phys"), "mujoco": ("mujoco", "crosssim")}
-REPORT_METHOD = config["report"]["method"]
-if REPORT_METHOD not in config["methods"]:
-    raise ValueError(f"config: report.method: unknown method {REPORT_METHOD!r}; known: {sorted(config['methods'])}")
-
-
-def report_suites():
-    """Suites of the tables: every scene of these gets a picture and a 3D viewer in the report."""
-    return sorted({spec["suite"] for spec in config["tables"].values() if "suite" in spec})
-
-
-def report_topology(wildcards):
-    """The support graph drawn beside a scene: the one the report method used, else the ground truth's."""
-    backend = config["methods"][REPORT_METHOD].get("topology")
-    if backend is None:
-        return f"results/scenes/{wildcards.suite}/{wildcards.scene}/gt/topology.json"
-    return f"results/topology/{backend}/{wildcards.suite}/{wildcards.scene}.json"
-
-
-def demo_gifs():
-    """Demo GIFs the report shows: results/demo/{suite}/{scene}.gif of the scenes export.smk animates.
-
-    Hook for the demo animation (workflow/rules/export.smk): when that file defines `demo_scenes()`
-    returning (suite, scene) pairs, their GIFs join the report under "Demo"; until then there are none.
-    """
-    lister = globals().get("demo_scenes")
-    return [f"results/demo/{suite}/{scene}.gif" for suite, scene in (lister() if lister else [])]
-
-
-def report_targets():
-    """Every file the report shows (rule all asks for them, so `snakemake --report` finds them made)."""
-    out = ["results/report/tables.html"]
-    out += [f"results/report/tables/{t}.html" for t in REPORT_TABLES]
-    out += [f"results/report/figures/{t}_bars.png" for t in BAR_TABLES]
-    out += [f"results/report/figures/drift_{engine}.png" for engine in DRIFT_FIGURES]
-    for suite in report_suites():
-        out += expand("results/report/scenes/{suite}/{scene}.png", suite=suite, scene=scene_ids(suite))
-        out += expand("results/report/viewers/{suite}/{scene}.html", suite=suite, scene=scene_ids(suite))
-    out += [g.replace("results/demo/", "results/report/demo/").replace(".gif", ".html") for g in demo_gifs()]
-    return out
-
-
-def table_files(tables):
-    return {**{f"csv_{t}": f"results/tables/{t}.csv" for t in tables},
-            **{f"md_{t}": f"results/tables/{t}.md" for t in tables}}
+include: "report_common.smk"
 
 
 rule report_front_tables:

@@ -33,6 +33,8 @@ Choices the paper leaves open, and what we do:
 
 from __future__ import annotations
 
+from typing import Callable
+
 import time
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
@@ -288,17 +290,47 @@ def resolve_penetration(active: SdfBody, context: list[SdfBody], ground_height: 
         ``iterations`` (Adam steps taken), ``initial_loss``, ``final_loss``, ``backtracked`` (bisection
         steps used), ``context`` (ids that were ever within reach), ``seconds``.
     """
-    import torch
-
     t0 = time.perf_counter()
     loss_fn = _Loss(active, context, ground_height, params.eps, params.ground_extreme_points)
-    x = torch.zeros(3, dtype=torch.float64, requires_grad=True)
-    opt = AdamState(x, params.lr)
+    x, info = minimize_hinge(loss_fn, (3,), params.lr, params.max_iterations, params.backtrack_steps)
+    info.update(context=sorted(loss_fn.used), seconds=time.perf_counter() - t0)
+    return x, info
+
+
+def minimize_hinge(loss_fn: Callable, shape: tuple[int, ...], lr: float, max_iterations: int,
+                   backtrack_steps: int) -> tuple[np.ndarray, dict]:
+    """Adam on a translation (or several) from zero until a hinge loss is exactly zero, then back to its boundary.
+
+    Adam stops at the first iterate with zero loss (its momentum would otherwise carry the
+    objects further away); with ``backtrack_steps`` > 0 the last step is then bisected back
+    towards the last iterate with a positive loss, so the result ends at the clearance instead of
+    overshooting it.
+
+    Parameters
+    ----------
+    loss_fn
+        ``loss_fn(x) -> scalar tensor`` for a float64 tensor ``x`` of ``shape``; zero when clear.
+    shape
+        Shape of the translation tensor: ``(3,)`` for one object, ``(k, 3)`` for ``k`` objects.
+    lr, max_iterations, backtrack_steps
+        Adam learning rate, iteration cap and bisection steps.
+
+    Returns
+    -------
+    x : float array of ``shape``
+        The translation(s).
+    info : dict
+        ``iterations``, ``initial_loss``, ``final_loss``, ``backtracked``.
+    """
+    import torch
+
+    x = torch.zeros(shape, dtype=torch.float64, requires_grad=True)
+    opt = AdamState(x, lr)
     loss = loss_fn(x)
     initial = float(loss.detach())
     iterations = 0
     x_prev = x.detach().clone()
-    while float(loss.detach()) > 0.0 and iterations < params.max_iterations:
+    while float(loss.detach()) > 0.0 and iterations < max_iterations:
         loss.backward()
         x_prev = x.detach().clone()
         opt.step()
@@ -306,10 +338,10 @@ def resolve_penetration(active: SdfBody, context: list[SdfBody], ground_height: 
         loss = loss_fn(x)
     final_x = x.detach().clone()
     backtracked = 0
-    if iterations and float(loss.detach()) == 0.0 and params.backtrack_steps:
+    if iterations and float(loss.detach()) == 0.0 and backtrack_steps:
         lo, hi = x_prev, final_x  # loss(lo) > 0, loss(hi) == 0
         with torch.no_grad():
-            for _ in range(params.backtrack_steps):
+            for _ in range(backtrack_steps):
                 mid = 0.5 * (lo + hi)
                 if float(loss_fn(mid)) == 0.0:
                     hi = mid
@@ -319,6 +351,5 @@ def resolve_penetration(active: SdfBody, context: list[SdfBody], ground_height: 
         final_x = hi
     with torch.no_grad():
         final = float(loss_fn(final_x))
-    info = {"iterations": iterations, "initial_loss": initial, "final_loss": final, "backtracked": backtracked,
-            "context": sorted(loss_fn.used), "seconds": time.perf_counter() - t0}
+    info = {"iterations": iterations, "initial_loss": initial, "final_loss": final, "backtracked": backtracked}
     return final_x.numpy().astype(float), info

@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from phiscene.assembly.penetration import AdamState, PenetrationParams, SdfBody, sdf_body
+from phiscene.assembly.penetration import PenetrationParams, SdfBody, minimize_hinge, sdf_body
 from phiscene.metrics.physical import box_gaps
 from phiscene.scene import Scene
 from phiscene.sdf_grid import GridParams
@@ -198,41 +198,12 @@ def solve_joint(bodies: list[SdfBody], ground_height: float | None, params: Join
         ``iterations``, ``initial_loss``, ``final_loss``, ``backtracked``, ``pairs`` (index pairs ever
         within reach), ``max_pairs`` (most pairs within reach at one evaluation), ``seconds``.
     """
-    import torch
-
     t0 = time.perf_counter()
     loss_fn = JointLoss(bodies, ground_height, params.eps, params.ground_extreme_points)
-    X = torch.zeros((len(bodies), 3), dtype=torch.float64, requires_grad=True)
-    opt = AdamState(X, params.lr)
-    loss = loss_fn(X)
-    initial = float(loss.detach())
-    iterations = 0
-    X_prev = X.detach().clone()
-    while float(loss.detach()) > 0.0 and iterations < params.max_iterations:
-        loss.backward()
-        X_prev = X.detach().clone()
-        opt.step()
-        iterations += 1
-        loss = loss_fn(X)
-    final_X = X.detach().clone()
-    backtracked = 0
-    if iterations and float(loss.detach()) == 0.0 and params.backtrack_steps:
-        lo, hi = X_prev, final_X  # loss(lo) > 0, loss(hi) == 0
-        with torch.no_grad():
-            for _ in range(params.backtrack_steps):
-                mid = 0.5 * (lo + hi)
-                if float(loss_fn(mid)) == 0.0:
-                    hi = mid
-                else:
-                    lo = mid
-                backtracked += 1
-        final_X = hi
-    with torch.no_grad():
-        final = float(loss_fn(final_X))
-    info = {"iterations": iterations, "initial_loss": initial, "final_loss": final, "backtracked": backtracked,
-            "pairs": sorted(loss_fn.pairs_seen), "max_pairs": max(loss_fn.pair_counts, default=0),
-            "seconds": time.perf_counter() - t0}
-    return final_X.numpy().astype(float), info
+    X, info = minimize_hinge(loss_fn, (len(bodies), 3), params.lr, params.max_iterations, params.backtrack_steps)
+    info.update(pairs=sorted(loss_fn.pairs_seen), max_pairs=max(loss_fn.pair_counts, default=0),
+                seconds=time.perf_counter() - t0)
+    return X, info
 
 
 def joint_sdf(scene: Scene, params: JointSdfParams, cache_dir: str | Path | None) -> tuple[Scene, dict]:

@@ -1,7 +1,7 @@
 """pybullet worlds: one DIRECT client per world, its id passed on every call.
 
 Bodies are built from convex proxies (a compound of convex hulls written to an
-OBJ file whose name is the hash of its content: pybullet caches collision
+OBJ file whose name is the hash of the hull vertices: pybullet caches collision
 meshes by file path). Poses in and out are phiscene poses (local-to-world
 4x4 with uniform scale); the conversion to pybullet's centre-of-mass frame is
 done here and nowhere else.
@@ -10,6 +10,7 @@ done here and nowhere else.
 from __future__ import annotations
 
 import hashlib
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,6 +21,8 @@ from phiscene.inertia import RigidProps
 from phiscene.sim.settings import SimSettings
 from phiscene.tolerances import GRAVITY
 from phiscene.transforms import decompose, make_pose, matrix_to_quat_xyzw, quat_xyzw_to_matrix
+
+log = logging.getLogger(__name__)
 
 #: Half thickness of the ground box (m); its top face is the ground plane.
 GROUND_HALF_THICKNESS = 0.5
@@ -48,13 +51,43 @@ def hulls_obj_text(hulls: list[np.ndarray]) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: Format of the cached hull OBJ files (part of their names: a change makes new files).
+HULL_OBJ_VERSION = 2
+
+
+def _hulls_key(hulls: list[np.ndarray]) -> str:
+    """SHA-256 (20 hex digits) of the hull vertex arrays: the cache key of their OBJ file."""
+    h = hashlib.sha256(f"phiscene.bullet_hulls/{HULL_OBJ_VERSION}".encode())
+    for v in hulls:
+        a = np.ascontiguousarray(v, dtype=np.float64)
+        h.update(str(a.shape).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()[:20]
+
+
+def _valid_hull_file(path: Path) -> bool:
+    """Whether a cached hull OBJ is whole: its first line holds the SHA-256 of the rest."""
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return False
+    head, _, body = data.partition(b"\n")
+    return head == b"# sha256 " + hashlib.sha256(body).hexdigest().encode()
+
+
 def hulls_obj_file(hulls: list[np.ndarray], cache_dir: str | Path) -> Path:
-    """Write (once) the hulls as an OBJ named by its content hash; return its path."""
-    text = hulls_obj_text(hulls)
-    digest = hashlib.sha256(text.encode()).hexdigest()[:20]
-    path = Path(cache_dir) / "bullet_hulls" / f"{digest}.obj"
-    if not path.exists():
-        write_text(path, text)
+    """The hulls as an OBJ file in the cache (written once, atomically); its path.
+
+    The file is named by a hash of the hull vertices, so the convex hulls are rebuilt only when the
+    file is missing; pybullet caches collision shapes by file name, so equal names must mean equal
+    content. Its first line holds the SHA-256 of the rest: a damaged file is detected and rewritten.
+    """
+    path = Path(cache_dir) / "bullet_hulls" / f"{_hulls_key(hulls)}.obj"
+    if not _valid_hull_file(path):
+        if path.exists():
+            log.warning("hull cache file %s is damaged; rewriting it", path)
+        body = hulls_obj_text(hulls)
+        write_text(path, f"# sha256 {hashlib.sha256(body.encode()).hexdigest()}\n{body}")
     return path
 
 
