@@ -92,3 +92,7 @@ def test_crosssim_and_runtime_tables(tmp_path):
     assert rt.loc[("methods/phi_scene", "contact"), "mean_s"] == 2.0
     assert rt.loc[("methods/phi_scene", "contact"), "max_rss_mb"] == 200
     assert rt.loc[("proxies", "contact"), "jobs"] == 1
+    from phiscene.tables import to_markdown
+
+    md = to_markdown(rt, {})
+    assert "| methods/phi_scene / contact " in md and "('" not in md  # readable labels, not tuples

@@ -220,7 +220,15 @@ def to_markdown(df: pd.DataFrame, directions: dict[str, str], digits: int = 4) -
     """Markdown table: floats like the paper, the best value of each ranked metric bold, the second underlined."""
     texts, marks = marked_cells(df, directions, digits)
     shown = texts.where(marks != 1, "**" + texts + "**").where(marks != 2, "<u>" + texts + "</u>")
-    return _flag_failures(shown, df).to_markdown() + "\n" + failure_note(df)
+    shown = _flag_failures(shown, df)
+    if isinstance(shown.index, pd.MultiIndex):  # e.g. (stage, suite) of the runtime table: one readable column
+        shown.index = pd.Index([_label(i) for i in shown.index], name=_label(shown.index.names))
+    return shown.to_markdown() + "\n" + failure_note(df)
+
+
+def _label(key) -> str:
+    """A row label (or index name) as text; the parts of a multi-level one joined by ' / '."""
+    return " / ".join(map(str, key)) if isinstance(key, (tuple, list)) else str(key)
 
 
 def _flag_failures(shown: pd.DataFrame, df: pd.DataFrame) -> pd.DataFrame:
@@ -260,8 +268,9 @@ def to_html(df: pd.DataFrame, directions: dict[str, str], digits: int = 4) -> st
             t = html.escape(texts.at[idx, c])
             m = marks.at[idx, c]
             cells.append(f"<td>{'<b>' + t + '</b>' if m == 1 else '<u>' + t + '</u>' if m == 2 else t}</td>")
-        rows.append(f"<tr><th>{html.escape(str(idx))}</th>{''.join(cells)}</tr>")
-    name = html.escape(str(df.index.name or ""))
+        rows.append(f"<tr><th>{html.escape(_label(idx))}</th>{''.join(cells)}</tr>")
+    names = df.index.names if isinstance(df.index, pd.MultiIndex) else df.index.name
+    name = html.escape(_label(names) if names is not None else "")
     return (f"<table>\n<thead><tr><th>{name}</th>{head}</tr></thead>\n<tbody>\n" + "\n".join(rows)
             + "\n</tbody>\n</table>\n")
 
