@@ -202,3 +202,17 @@ def test_report_opens_in_chromium(tmp_path):
     _run_chromium(exe, tmp_path, "--window-size=1400,1000", f"--screenshot={shot}", html_path.as_uri())
     img = np.asarray(Image.open(shot).convert("L"))
     assert img.shape == (1000, 1400) and img.std() > 20  # a drawn page, not a blank one
+
+
+def test_runtime_page_keeps_stage_and_suite_apart(tmp_path):
+    from phiscene.tables import runtime_table
+
+    # the same stage on two suites: two rows, not one row label standing for both
+    for suite, secs in [("contact", 1.0), ("rooms", 3.0)]:
+        p = tmp_path / "bench" / "proxies" / suite / "scene_000.tsv"
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text("s\th:m:s\tmax_rss\tcpu_time\n" f"{secs}\t0:00:01\t100\t{secs / 2}\n")
+    write_table(runtime_table(tmp_path / "bench"), tmp_path / "runtime.csv", tmp_path / "runtime.md", "Runtime", {})
+    page = report.table_block("runtime", tmp_path / "runtime.csv")
+    assert "<th>proxies / contact</th><td>1</td><td>1.0000</td>" in page
+    assert "<th>proxies / rooms</th><td>1</td><td>3.0000</td>" in page

@@ -53,12 +53,15 @@ class TableSpec:
         Columns drawn by :func:`phiscene.plots.method_bars` (empty: no bar chart).
     log
         Logarithmic value axes for the bars.
+    index_columns
+        Leading CSV columns that name a row (the runtime table's rows are (stage, suite) pairs).
     """
 
     title: str
     directions: dict
     bars: tuple[str, ...] = ()
     log: bool = False
+    index_columns: int = 1
 
 
 #: The tables of ``results/tables/`` the report shows, in page order.
@@ -73,7 +76,7 @@ TABLES: dict[str, TableSpec] = {
                           (*TOPO_COLUMNS, "f1_macro")),
     "ablation": TableSpec("Ablations and baselines (paper Tab. 6; mask IoU in place of CLIP-I)", ABLATION_COLUMNS,
                           tuple(ABLATION_COLUMNS), log=True),
-    "runtime": TableSpec("Runtime per stage (seconds, MB)", {}),
+    "runtime": TableSpec("Runtime per stage (seconds, MB)", {}, index_columns=2),
 }
 
 _CSS = """
@@ -97,8 +100,8 @@ div.prose:has(.phiscene-tables){max-width:64rem}
 _NOTE = "bold = best, underlined = second; ↓ lower is better, ↑ higher is better; avg_rank is the paper's average rank"
 
 
-def read_table(table_csv: str | Path):
-    """A table CSV of :mod:`phiscene.tables` (first column = row names) as a DataFrame.
+def read_table(table_csv: str | Path, index_columns: int = 1):
+    """A table CSV of :mod:`phiscene.tables` (the first ``index_columns`` columns name the rows) as a DataFrame.
 
     Raises
     ------
@@ -109,10 +112,10 @@ def read_table(table_csv: str | Path):
 
     table_csv = Path(table_csv)
     try:
-        df = pd.read_csv(table_csv, index_col=0)
+        df = pd.read_csv(table_csv, index_col=list(range(index_columns)) if index_columns > 1 else 0)
     except Exception as exc:  # pandas raises several types
         raise InputError(table_csv, None, f"cannot read table ({type(exc).__name__}: {str(exc)[:120]})") from None
-    if df.index.name is None:
+    if any(name is None for name in df.index.names):
         raise InputError(table_csv, None, "not a table (no header row naming the first column)")
     return df
 
@@ -144,7 +147,7 @@ def table_block(name: str, table_csv: str | Path, markdown: str | Path | None = 
     from phiscene.tables import to_html
 
     spec = _spec(name)
-    df = read_table(table_csv)
+    df = read_table(table_csv, spec.index_columns)
     for c in spec.directions:
         if c not in df.columns:
             raise InputError(table_csv, c, f"ranked column of the {name} table missing")
