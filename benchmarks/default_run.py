@@ -1,11 +1,13 @@
 """Time the default run (``snakemake -j2 <targets>``) from an empty results/ folder.
 
-The environment must already be installed (``make env``); the proxy cache is
-emptied too, so this is a cold run. Usage::
+The environment must already be installed (``make env``). The run happens in a fresh folder (a new
+temporary one unless ``--workdir`` is given; its ``results/`` is emptied first), so caches are cold and
+the repository's own ``results/`` is left alone. Usage::
 
-    python benchmarks/default_run.py [--jobs 2] [--keep] [TARGET ...]
+    python benchmarks/default_run.py [--jobs 2] [--workdir DIR] [TARGET ...]
 
-Prints wall time, and per-rule totals from the benchmark TSVs.
+Prints wall time, and per-rule totals from the benchmark TSVs. Compare ``--jobs 1`` with ``--jobs 2``
+for the parallel speed-up.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import argparse
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -37,10 +40,11 @@ def rule_seconds(results: Path) -> pd.DataFrame:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--workdir", default=None, help="run in this folder instead of the repository (default: repo)")
+    ap.add_argument("--workdir", default=None, help="run in this folder (default: a new temporary folder)")
     ap.add_argument("targets", nargs="*", default=["results/tables/phys.csv"])
     args = ap.parse_args()
-    work = Path(args.workdir) if args.workdir else ROOT
+    work = Path(args.workdir) if args.workdir else Path(tempfile.mkdtemp(prefix="phiscene-default-run-"))
+    print(f"running in {work}", flush=True)
     results = work / "results"
     if results.exists():
         shutil.rmtree(results)
