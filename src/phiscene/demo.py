@@ -17,12 +17,13 @@ the launch point. Frames are written as a looping GIF with Pillow.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from phiscene.errors import InputError
+from phiscene.params import Params
 from phiscene.tolerances import GRAVITY
 
 #: Colour of the ball (RGB 0-255).
@@ -30,7 +31,7 @@ BALL_RGB = (230, 40, 40)
 
 
 @dataclass(frozen=True)
-class DemoParams:
+class DemoParams(Params):
     """Settings of the perturbation demo (config ``export.demo``).
 
     Attributes
@@ -60,6 +61,8 @@ class DemoParams:
         GIF size in pixels (the camera angles and light come from the render settings).
     """
 
+    _label = "demo parameters"
+
     seconds: float = 2.5
     fps: float = 15.0
     ball_radius: float = 0.0
@@ -86,19 +89,6 @@ class DemoParams:
             raise ValueError(f"demo width and height must be >= 16, got {self.width} x {self.height}")
         if self.ball_radius == 0 and self.ball_radius_frac == 0:
             raise ValueError("demo ball_radius and ball_radius_frac are both 0")
-
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "DemoParams":
-        """Build from a config mapping; unknown keys raise ``ValueError`` naming them."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown demo parameters {unknown}; known: {sorted(known)}")
-        return cls(**d)
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 @dataclass

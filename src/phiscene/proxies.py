@@ -25,6 +25,7 @@ from phiscene.atomic import atomic_path
 from phiscene.errors import InputError
 from phiscene.failures import raise_if_failed
 from phiscene.meshes import load_mesh, mesh_hash
+from phiscene.params import Params
 
 log = logging.getLogger(__name__)
 
@@ -33,7 +34,7 @@ PROXY_VERSION = 1
 
 
 @dataclass(frozen=True)
-class ProxyParams:
+class ProxyParams(Params):
     """Convex decomposition parameters.
 
     Attributes
@@ -56,6 +57,8 @@ class ProxyParams:
         Random seed of the decomposition.
     """
 
+    _label = "proxy parameters"
+
     backend: str = "coacd"
     threshold: float = 0.08
     max_hulls: int = 16
@@ -67,17 +70,10 @@ class ProxyParams:
     mcts_max_depth: int = 2
     seed: int = 0
 
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "ProxyParams":
-        d = dict(d or {})
-        known = set(cls.__dataclass_fields__)
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown proxy parameters {unknown}; known: {sorted(known)}")
-        p = cls(**d)
-        if p.backend not in ("coacd", "vhacd", "convex"):
-            raise ValueError(f"proxy backend must be coacd, vhacd or convex, got {p.backend!r}")
-        return p
+    def check(self) -> None:
+        """Reject an unknown ``backend`` (``ValueError``)."""
+        if self.backend not in ("coacd", "vhacd", "convex"):
+            raise ValueError(f"proxy backend must be coacd, vhacd or convex, got {self.backend!r}")
 
     def digest(self) -> str:
         text = json.dumps({**asdict(self), "version": PROXY_VERSION}, sort_keys=True)

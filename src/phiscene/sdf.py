@@ -27,18 +27,19 @@ exceeds ``exact_band`` (it is orders of magnitude smaller; see the tests).
 from __future__ import annotations
 
 from collections import OrderedDict
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 import trimesh
 
+from phiscene.params import Params
 from phiscene.tolerances import TOL
 
 _FOUR_PI = 4.0 * np.pi
 
 
 @dataclass(frozen=True)
-class WindingParams:
+class WindingParams(Params):
     """Parameters of the hierarchical winding-number evaluation.
 
     Attributes
@@ -58,24 +59,13 @@ class WindingParams:
         Most points traversing the hierarchy together (bounds the traversal's memory).
     """
 
+    _label = "winding parameters"
+
     leaf_size: int = 8
     far_ratio: float = 1.5
     exact_band: float = 0.25
     chunk: int = 1 << 14
     batch: int = 4096
-
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "WindingParams":
-        """Build from a mapping; unknown keys raise ``ValueError`` naming them."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown winding parameters {unknown}; known: {sorted(known)}")
-        return cls(**d)
-
-
-# -- solid angles ---------------------------------------------------------------------------------------------------
 def _solid_angle(ax, ay, az, bx, by, bz, cx, cy, cz) -> np.ndarray:
     """Signed solid angle of triangles seen from the origin (Van Oosterom-Strackee), from coordinate arrays.
 

@@ -35,7 +35,7 @@ import hashlib
 import json
 import logging
 from collections import OrderedDict
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +43,7 @@ import trimesh
 
 from phiscene.atomic import atomic_path
 from phiscene.meshes import mesh_hash
+from phiscene.params import Params
 from phiscene.transforms import decompose
 
 log = logging.getLogger(__name__)
@@ -56,7 +57,7 @@ _MEMORY_SIZE = 128
 
 
 @dataclass(frozen=True)
-class GridParams:
+class GridParams(Params):
     """Grid construction parameters (lengths in the mesh's unscaled local units, metres).
 
     Attributes
@@ -79,6 +80,8 @@ class GridParams:
         Seed of the error-measurement points.
     """
 
+    _label = "SDF grid parameters"
+
     resolution: int = 64
     cells_across: int = 8
     min_points: int = 8
@@ -89,20 +92,14 @@ class GridParams:
     error_samples: int = 4096
     seed: int = 0
 
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "GridParams":
-        """Build from a mapping; unknown keys raise ``ValueError`` naming them."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown SDF grid parameters {unknown}; known: {sorted(known)}")
-        p = cls(**d)
-        if min(p.resolution, p.min_points) < 2 or p.max_points < max(p.min_points, p.resolution) or p.cells_across < 1:
-            raise ValueError(f"SDF grid needs resolution, min_points >= 2, max_points >= both, cells_across >= 1: {p}")
-        if p.pad_fraction < 0 or p.pad_abs < 0:
-            raise ValueError(f"SDF grid padding must be >= 0, got {p.pad_fraction}, {p.pad_abs}")
-        return p
+    def check(self) -> None:
+        """Reject too few grid points or negative padding (``ValueError``)."""
+        if (min(self.resolution, self.min_points) < 2 or self.max_points < max(self.min_points, self.resolution)
+                or self.cells_across < 1):
+            raise ValueError("SDF grid needs resolution, min_points >= 2, max_points >= both, cells_across >= 1: "
+                             f"{self}")
+        if self.pad_fraction < 0 or self.pad_abs < 0:
+            raise ValueError(f"SDF grid padding must be >= 0, got {self.pad_fraction}, {self.pad_abs}")
 
     def digest(self) -> str:
         """Hash of the parameters that change grid values (error settings included: they are stored)."""

@@ -14,7 +14,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
@@ -23,6 +23,7 @@ import numpy as np
 from phiscene.assembly.penetration import PenetrationParams, SdfBody, resolve_penetration, sdf_body
 from phiscene.assembly.settle import SettleParams, settle_object, window_motion
 from phiscene.errors import InputError
+from phiscene.params import Params
 from phiscene.proxies import Proxy
 from phiscene.scene import Scene
 from phiscene.sim.settings import SimSettings
@@ -35,7 +36,7 @@ LOG_FORMAT = "phiscene.assembly_log/1"
 
 
 @dataclass(frozen=True)
-class AssemblyParams:
+class AssemblyParams(Params):
     """Settings of the assembly; the two switches give the paper's ablations.
 
     Attributes
@@ -50,35 +51,18 @@ class AssemblyParams:
         See :class:`~phiscene.assembly.settle.SettleParams`.
     """
 
+    _label = "assembly parameters"
+
     penetration: bool = True
     settle: bool = True
     penetration_params: PenetrationParams = field(default_factory=PenetrationParams)
     settle_params: SettleParams = field(default_factory=SettleParams)
 
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "AssemblyParams":
-        """Build from a mapping with nested ``penetration_params`` / ``settle_params`` mappings.
-
-        Unknown keys (at any level) raise ``ValueError`` naming them.
-        """
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown assembly parameters {unknown}; known: {sorted(known)}")
+    def check(self) -> None:
+        """Reject ``penetration`` / ``settle`` switches that are not booleans (``ValueError``)."""
         for key in ("penetration", "settle"):
-            if key in d and not isinstance(d[key], bool):
-                raise ValueError(f"assembly parameter {key!r} must be true or false, got {d[key]!r}")
-        if not isinstance(d.get("penetration_params"), PenetrationParams):
-            d["penetration_params"] = PenetrationParams.from_dict(d.get("penetration_params"))
-        if not isinstance(d.get("settle_params"), SettleParams):
-            d["settle_params"] = SettleParams.from_dict(d.get("settle_params"))
-        return cls(**d)
-
-    def to_dict(self) -> dict:
-        return {"penetration": self.penetration, "settle": self.settle,
-                "penetration_params": self.penetration_params.to_dict(),
-                "settle_params": self.settle_params.to_dict()}
+            if not isinstance(getattr(self, key), bool):
+                raise ValueError(f"assembly parameter {key!r} must be true or false, got {getattr(self, key)!r}")
 
 
 def full_order(scene: Scene, order: list[str]) -> tuple[list[str], list[str]]:

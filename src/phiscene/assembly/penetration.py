@@ -36,17 +36,18 @@ from __future__ import annotations
 from typing import Callable
 
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from phiscene.params import Params
 from phiscene.sdf_grid import GridParams, SdfGrid, sdf_grid
 from phiscene.transforms import decompose, transform_points
 
 
 @dataclass(frozen=True)
-class PenetrationParams:
+class PenetrationParams(Params):
     """Parameters of the SDF penetration solve (paper values as defaults).
 
     Attributes
@@ -70,6 +71,8 @@ class PenetrationParams:
         SDF grid parameters.
     """
 
+    _label = "penetration parameters"
+
     n_active: int = 2048
     n_context: int = 2048
     eps: float = 0.005
@@ -80,25 +83,12 @@ class PenetrationParams:
     seed: int = 0
     grid: GridParams = field(default_factory=GridParams)
 
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "PenetrationParams":
-        """Build from a mapping (``grid`` may be a nested mapping); unknown keys raise ``ValueError``."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown penetration parameters {unknown}; known: {sorted(known)}")
-        if isinstance(d.get("grid"), dict) or d.get("grid") is None:
-            d["grid"] = GridParams.from_dict(d.get("grid"))
-        p = cls(**d)
-        if p.n_active < 1 or p.n_context < 1 or p.max_iterations < 0 or p.backtrack_steps < 0:
-            raise ValueError(f"penetration sample counts must be >= 1 and iteration counts >= 0: {p}")
-        if p.eps < 0 or p.lr <= 0:
-            raise ValueError(f"penetration eps must be >= 0 and lr > 0, got eps={p.eps}, lr={p.lr}")
-        return p
-
-    def to_dict(self) -> dict:
-        return asdict(self)
+    def check(self) -> None:
+        """Reject sample counts < 1, negative iteration counts or ``eps``, and ``lr <= 0`` (``ValueError``)."""
+        if self.n_active < 1 or self.n_context < 1 or self.max_iterations < 0 or self.backtrack_steps < 0:
+            raise ValueError(f"penetration sample counts must be >= 1 and iteration counts >= 0: {self}")
+        if self.eps < 0 or self.lr <= 0:
+            raise ValueError(f"penetration eps must be >= 0 and lr > 0, got eps={self.eps}, lr={self.lr}")
 
 
 @dataclass

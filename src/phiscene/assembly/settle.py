@@ -29,16 +29,17 @@ criterion.
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
+from phiscene.params import Params
 from phiscene.sim.bullet import BulletWorld
 from phiscene.transforms import decompose, rotation_angle
 
 
 @dataclass(frozen=True)
-class SettleParams:
+class SettleParams(Params):
     """Settling parameters (paper values for the criterion and the cap).
 
     Attributes
@@ -61,6 +62,8 @@ class SettleParams:
         After a ramp that met the criterion, restore damping and re-test one window.
     """
 
+    _label = "settle parameters"
+
     window: int = 15
     eps_pos: float = 1e-4
     eps_rot: float = 1e-4
@@ -70,23 +73,12 @@ class SettleParams:
     ramp_damping: float = 0.9
     verify: bool = True
 
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "SettleParams":
-        """Build from a mapping; unknown keys raise ``ValueError`` naming them."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown settle parameters {unknown}; known: {sorted(known)}")
-        p = cls(**d)
-        if p.window < 1 or min(p.max_frames, p.extra_frames, p.ramp_frames) < 0:
-            raise ValueError(f"settle window must be >= 1 and frame counts >= 0: {p}")
-        if not 0.0 <= p.ramp_damping < 1.0:
-            raise ValueError(f"settle ramp_damping must be in [0, 1), got {p.ramp_damping}")
-        return p
-
-    def to_dict(self) -> dict:
-        return asdict(self)
+    def check(self) -> None:
+        """Reject ``window < 1``, negative frame counts and ``ramp_damping`` outside [0, 1) (``ValueError``)."""
+        if self.window < 1 or min(self.max_frames, self.extra_frames, self.ramp_frames) < 0:
+            raise ValueError(f"settle window must be >= 1 and frame counts >= 0: {self}")
+        if not 0.0 <= self.ramp_damping < 1.0:
+            raise ValueError(f"settle ramp_damping must be in [0, 1), got {self.ramp_damping}")
 
 
 @dataclass

@@ -42,13 +42,14 @@ from __future__ import annotations
 
 import logging
 import shutil
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from phiscene.atomic import atomic_path
 from phiscene.errors import InputError
+from phiscene.params import Params
 from phiscene.scene import Scene, SceneObject, load_scene, save_scene
 from phiscene.tolerances import TOL
 from phiscene.transforms import rigidity_error
@@ -68,7 +69,7 @@ LAYOUTS = ("auto", "meshes", "poses", "scene")
 
 
 @dataclass(frozen=True)
-class ImportParams:
+class ImportParams(Params):
     """Options of :func:`import_external`.
 
     Attributes
@@ -82,28 +83,19 @@ class ImportParams:
         (logged).
     """
 
+    _label = "import parameters"
+
     layout: str = "auto"
     missing: str = "error"
     extra: str = "error"
 
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "ImportParams":
-        """Build from a mapping; unknown keys or values raise ``ValueError``."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown import parameters {unknown}; known: {sorted(known)}")
-        p = cls(**d)
-        if p.layout not in LAYOUTS:
-            raise ValueError(f"import layout must be one of {list(LAYOUTS)}, got {p.layout!r}")
-        if p.missing not in ("error", "keep") or p.extra not in ("error", "ignore"):
-            raise ValueError(f"import missing must be error|keep and extra error|ignore, got {p.missing!r}, "
-                             f"{p.extra!r}")
-        return p
-
-    def to_dict(self) -> dict:
-        return asdict(self)
+    def check(self) -> None:
+        """Reject an unknown ``layout``, ``missing`` or ``extra`` value (``ValueError``)."""
+        if self.layout not in LAYOUTS:
+            raise ValueError(f"import layout must be one of {list(LAYOUTS)}, got {self.layout!r}")
+        if self.missing not in ("error", "keep") or self.extra not in ("error", "ignore"):
+            raise ValueError(f"import missing must be error|keep and extra error|ignore, got {self.missing!r}, "
+                             f"{self.extra!r}")
 
 
 # -- layout detection ------------------------------------------------------------------------------------------------

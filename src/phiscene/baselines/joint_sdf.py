@@ -34,13 +34,14 @@ next to the SDF lookups.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from phiscene.assembly.penetration import PenetrationParams, SdfBody, minimize_hinge, sdf_body
 from phiscene.metrics.physical import box_gaps
+from phiscene.params import Params
 from phiscene.scene import Scene
 from phiscene.sdf_grid import GridParams
 
@@ -49,7 +50,7 @@ LOG_FORMAT = "phiscene.joint_sdf_log/1"
 
 
 @dataclass(frozen=True)
-class JointSdfParams:
+class JointSdfParams(Params):
     """Parameters of the joint SDF solve (paper values as defaults, shared with the sequential stage).
 
     Attributes
@@ -75,6 +76,8 @@ class JointSdfParams:
         SDF grid parameters.
     """
 
+    _label = "joint SDF parameters"
+
     n_samples: int = 2048
     eps: float = 0.005
     lr: float = 0.005
@@ -85,25 +88,12 @@ class JointSdfParams:
     seed: int = 0
     grid: GridParams = field(default_factory=GridParams)
 
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "JointSdfParams":
-        """Build from a mapping (``grid`` may be a nested mapping); unknown keys raise ``ValueError``."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown joint SDF parameters {unknown}; known: {sorted(known)}")
-        if not isinstance(d.get("grid"), GridParams):
-            d["grid"] = GridParams.from_dict(d.get("grid"))
-        p = cls(**d)
-        if p.n_samples < 1 or p.max_iterations < 0 or p.backtrack_steps < 0:
-            raise ValueError(f"joint SDF n_samples must be >= 1 and iteration counts >= 0: {p}")
-        if p.eps < 0 or p.lr <= 0:
-            raise ValueError(f"joint SDF eps must be >= 0 and lr > 0, got eps={p.eps}, lr={p.lr}")
-        return p
-
-    def to_dict(self) -> dict:
-        return asdict(self)
+    def check(self) -> None:
+        """Reject ``n_samples < 1``, negative iteration counts or ``eps``, and ``lr <= 0`` (``ValueError``)."""
+        if self.n_samples < 1 or self.max_iterations < 0 or self.backtrack_steps < 0:
+            raise ValueError(f"joint SDF n_samples must be >= 1 and iteration counts >= 0: {self}")
+        if self.eps < 0 or self.lr <= 0:
+            raise ValueError(f"joint SDF eps must be >= 0 and lr > 0, got eps={self.eps}, lr={self.lr}")
 
     def penetration_params(self) -> PenetrationParams:
         """The equivalent sequential-stage parameters (used to build the shared SDF bodies)."""

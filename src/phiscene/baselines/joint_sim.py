@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import time
 from collections import deque
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +31,7 @@ import numpy as np
 from phiscene.assembly.settle import window_motion
 from phiscene.baselines.joint_sdf import JointSdfParams, joint_sdf
 from phiscene.errors import InputError
+from phiscene.params import Params
 from phiscene.proxies import Proxy
 from phiscene.scene import Scene
 from phiscene.sim.settings import SimSettings
@@ -41,7 +42,7 @@ LOG_FORMAT = "phiscene.joint_sim_log/1"
 
 
 @dataclass(frozen=True)
-class JointSimParams:
+class JointSimParams(Params):
     """Stopping rule of the joint simulation (paper criterion values).
 
     Attributes
@@ -56,30 +57,21 @@ class JointSimParams:
         Cap on simulated frames.
     """
 
+    _label = "joint simulation parameters"
+
     window: int = 15
     eps_pos: float = 1e-4
     eps_rot: float = 1e-4
     max_frames: int = 240
 
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "JointSimParams":
-        """Build from a mapping; unknown keys raise ``ValueError`` naming them."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown joint simulation parameters {unknown}; known: {sorted(known)}")
-        p = cls(**d)
-        if p.window < 1 or p.max_frames < 0 or p.eps_pos < 0 or p.eps_rot < 0:
-            raise ValueError(f"joint simulation window must be >= 1, max_frames and thresholds >= 0: {p}")
-        return p
-
-    def to_dict(self) -> dict:
-        return asdict(self)
+    def check(self) -> None:
+        """Reject ``window < 1`` and negative ``max_frames`` or thresholds (``ValueError``)."""
+        if self.window < 1 or self.max_frames < 0 or self.eps_pos < 0 or self.eps_rot < 0:
+            raise ValueError(f"joint simulation window must be >= 1, max_frames and thresholds >= 0: {self}")
 
 
 @dataclass(frozen=True)
-class JointSdfSimParams:
+class JointSdfSimParams(Params):
     """Parameters of :func:`joint_sdf_sim`: the joint SDF solve, then the joint simulation.
 
     Attributes
@@ -90,23 +82,10 @@ class JointSdfSimParams:
         See :class:`JointSimParams`.
     """
 
+    _label = "joint SDF + simulation parameters"
+
     sdf: JointSdfParams = field(default_factory=JointSdfParams)
     sim: JointSimParams = field(default_factory=JointSimParams)
-
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "JointSdfSimParams":
-        """Build from a mapping with nested ``sdf`` / ``sim`` mappings; unknown keys raise ``ValueError``."""
-        d = dict(d or {})
-        unknown = sorted(set(d) - {"sdf", "sim"})
-        if unknown:
-            raise ValueError(f"unknown joint SDF + simulation parameters {unknown}; known: ['sdf', 'sim']")
-        sdf = d.get("sdf")
-        sim = d.get("sim")
-        return cls(sdf=sdf if isinstance(sdf, JointSdfParams) else JointSdfParams.from_dict(sdf),
-                   sim=sim if isinstance(sim, JointSimParams) else JointSimParams.from_dict(sim))
-
-    def to_dict(self) -> dict:
-        return {"sdf": self.sdf.to_dict(), "sim": self.sim.to_dict()}
 
 
 def _finite(v: float) -> float | None:

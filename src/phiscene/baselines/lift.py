@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from phiscene.baselines.joint_sim import JointSimParams, check_proxies, joint_sim
+from phiscene.params import Params
 from phiscene.proxies import Proxy
 from phiscene.scene import Scene
 from phiscene.sim.settings import SimSettings
@@ -37,7 +38,7 @@ LOG_FORMAT = "phiscene.lift_sim_log/1"
 
 
 @dataclass(frozen=True)
-class LiftParams:
+class LiftParams(Params):
     """Parameters of the lift baseline.
 
     Attributes
@@ -48,25 +49,16 @@ class LiftParams:
         Joint simulation stopping rule, see :class:`~phiscene.baselines.joint_sim.JointSimParams`.
     """
 
+    _label = "lift parameters"
+    _coerce = {"gap": float}
+
     gap: float = 0.002
     sim: JointSimParams = field(default_factory=JointSimParams)
 
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "LiftParams":
-        """Build from a mapping (``sim`` a nested mapping); unknown keys raise ``ValueError``."""
-        d = dict(d or {})
-        unknown = sorted(set(d) - {"gap", "sim"})
-        if unknown:
-            raise ValueError(f"unknown lift parameters {unknown}; known: ['gap', 'sim']")
-        sim = d.get("sim")
-        p = cls(gap=float(d.get("gap", cls.gap)),
-                sim=sim if isinstance(sim, JointSimParams) else JointSimParams.from_dict(sim))
-        if not (np.isfinite(p.gap) and p.gap >= 0.0):
-            raise ValueError(f"lift gap must be finite and >= 0, got {p.gap}")
-        return p
-
-    def to_dict(self) -> dict:
-        return {"gap": self.gap, "sim": self.sim.to_dict()}
+    def check(self) -> None:
+        """Reject a negative or non-finite ``gap`` (``ValueError``)."""
+        if not (np.isfinite(self.gap) and self.gap >= 0.0):
+            raise ValueError(f"lift gap must be finite and >= 0, got {self.gap}")
 
 
 def single_parent(graph: SupportGraph) -> dict[str, str]:

@@ -24,7 +24,7 @@ import os
 import shutil
 import tempfile
 import time
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +39,7 @@ from phiscene.bench.render import RenderParams, camera_for, labels_to_colors, re
 from phiscene.bench.templates import (GROUND, LIBRARIES, SUITE_DEFAULTS, TEMPLATES, Placement, TemplateError,
                                       TemplateParams, template_names)
 from phiscene.meshes import save_mesh
+from phiscene.params import Params
 from phiscene.proxies import ProxyParams
 from phiscene.scene import Scene, SceneObject, save_scene
 from phiscene.sim.settings import SimSettings
@@ -50,7 +51,7 @@ BENCH_VERSION = 1
 
 
 @dataclass(frozen=True)
-class BenchParams:
+class BenchParams(Params):
     """The ``benchmark`` config section, parsed.
 
     Attributes
@@ -70,6 +71,9 @@ class BenchParams:
         :class:`RenderParams`, :class:`SimSettings`, :class:`ProxyParams`.
     """
 
+    _label = "benchmark parameters"
+    _coerce = {"n_objects": lambda v: tuple(int(x) for x in v), "templates": lambda v: tuple(v or ())}
+
     seed: int = 0
     n_assets: int = 48
     n_objects: tuple[int, int] = (3, 8)
@@ -82,24 +86,11 @@ class BenchParams:
     sim: SimSettings = field(default_factory=SimSettings)
     proxies: ProxyParams = field(default_factory=ProxyParams)
 
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "BenchParams":
-        """Parse a config mapping; unknown keys (also inside sections) raise ``ValueError`` naming them."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown benchmark parameters {unknown}; known: {sorted(known)}")
-        sections = {"template": TemplateParams, "gt": GTParams, "degrade": DegradeParams, "render": RenderParams,
-                    "sim": SimSettings, "proxies": ProxyParams}
-        for key, typ in sections.items():
-            d[key] = typ.from_dict(d.get(key))
-        lo, hi = (int(v) for v in d.get("n_objects", (3, 8)))
-        if not 1 <= lo <= hi:
-            raise ValueError(f"benchmark n_objects must be [min, max] with 1 <= min <= max, got {[lo, hi]}")
-        d["n_objects"] = (lo, hi)
-        d["templates"] = tuple(d.get("templates") or ())
-        return cls(**d)
+    def check(self) -> None:
+        """Reject an ``n_objects`` that is not ``[min, max]`` with ``1 <= min <= max`` (``ValueError``)."""
+        if len(self.n_objects) != 2 or not 1 <= self.n_objects[0] <= self.n_objects[1]:
+            raise ValueError("benchmark n_objects must be [min, max] with 1 <= min <= max, got "
+                             f"{list(self.n_objects)}")
 
 
 def default_params() -> dict:

@@ -15,17 +15,18 @@ is bounded. Meshes are untouched: the initial scene points to the GT meshes.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from phiscene.params import Params
 from phiscene.scene import Scene
 from phiscene.transforms import decompose, make_pose
 
 
 @dataclass(frozen=True)
-class DegradeParams:
+class DegradeParams(Params):
     """Magnitudes of the pose errors of the initial scene.
 
     Attributes
@@ -45,6 +46,8 @@ class DegradeParams:
         Normal draws are clipped at this many standard deviations. Default 3.
     """
 
+    _label = "degradation parameters"
+
     translation_xy_sigma: float = 0.015
     translation_z_sigma: float = 0.005
     vertical_offset_min: float = -0.02
@@ -53,25 +56,14 @@ class DegradeParams:
     scale_sigma: float = 0.03
     truncate: float = 3.0
 
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "DegradeParams":
-        """Build from a config mapping; unknown keys raise ``ValueError`` naming them."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown degradation parameters {unknown}; known: {sorted(known)}")
-        p = cls(**d)
-        if p.vertical_offset_min > p.vertical_offset_max:
+    def check(self) -> None:
+        """Reject an empty vertical offset range, negative sigmas and scales that could reach 0 (``ValueError``)."""
+        if self.vertical_offset_min > self.vertical_offset_max:
             raise ValueError("vertical_offset_min must not exceed vertical_offset_max")
-        if min(p.translation_xy_sigma, p.translation_z_sigma, p.rotation_sigma_deg, p.scale_sigma) < 0:
+        if min(self.translation_xy_sigma, self.translation_z_sigma, self.rotation_sigma_deg, self.scale_sigma) < 0:
             raise ValueError("degradation sigmas must be >= 0")
-        if p.truncate * p.scale_sigma >= 1:
+        if self.truncate * self.scale_sigma >= 1:
             raise ValueError("truncate * scale_sigma must be < 1 (scales must stay positive)")
-        return p
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 def _normal(rng: np.random.Generator, sigma: float, truncate: float, size=None):

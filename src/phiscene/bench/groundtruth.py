@@ -14,13 +14,14 @@ weight, or when it pushes A sideways and A falls once B is removed (leaning).
 from __future__ import annotations
 
 import contextlib
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
 
 import numpy as np
 
 from phiscene.inertia import rigid_props
+from phiscene.params import Params
 from phiscene.proxies import Proxy, ProxyParams, proxy_for_mesh
 from phiscene.scene import Scene
 from phiscene.sim.bullet import BulletWorld
@@ -33,7 +34,7 @@ CONTAINERS = ("tray", "crate")
 
 
 @dataclass(frozen=True)
-class GTParams:
+class GTParams(Params):
     """Settling, verification and support-graph parameters.
 
     Attributes
@@ -65,6 +66,8 @@ class GTParams:
         (ground contacts are always ``supports``).
     """
 
+    _label = "ground-truth parameters"
+
     settle_seconds: float = 4.0
     rest_frames: int = 30
     rest_speed: float = 1e-3
@@ -80,16 +83,6 @@ class GTParams:
     removal_move_m: float = 0.002
     average_frames: int = 10
     lean_angle_deg: float = 30.0
-
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "GTParams":
-        """Build from a config mapping; unknown keys raise ``ValueError`` naming them."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown ground-truth parameters {unknown}; known: {sorted(known)}")
-        return cls(**d)
 
 
 @dataclass

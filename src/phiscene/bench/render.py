@@ -25,12 +25,13 @@ from __future__ import annotations
 
 import colorsys
 import tempfile
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from phiscene.errors import InputError
+from phiscene.params import Params
 from phiscene.scene import Scene
 
 CAMERA_FORMAT = "phiscene.camera/1"
@@ -40,7 +41,7 @@ GROUND_RGB = (0.82, 0.82, 0.80)
 
 
 @dataclass(frozen=True)
-class RenderParams:
+class RenderParams(Params):
     """Reference camera and renderer settings.
 
     Attributes
@@ -65,6 +66,9 @@ class RenderParams:
         Fewest segmentation pixels an object must cover (the benchmark rejects scenes with hidden objects).
     """
 
+    _label = "render parameters"
+    _coerce = {"light_direction": lambda v: tuple(float(x) for x in v)}
+
     width: int = 320
     height: int = 240
     fov_y_deg: float = 45.0
@@ -76,18 +80,6 @@ class RenderParams:
     light_direction: tuple[float, float, float] = (0.4, -0.6, 1.0)
     shadow: bool = True
     min_visible_pixels: int = 40
-
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "RenderParams":
-        """Build from a config mapping; unknown keys raise ``ValueError`` naming them."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown render parameters {unknown}; known: {sorted(known)}")
-        if "light_direction" in d:
-            d["light_direction"] = tuple(float(v) for v in d["light_direction"])
-        return cls(**d)
 
 
 def segmentation_colors(n: int) -> list[tuple[int, int, int]]:

@@ -14,12 +14,13 @@ The group is built in a canonical frame and then turned by a random yaw.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
 from phiscene.bench.assets import Asset, by_category
+from phiscene.params import Params
 from phiscene.transforms import make_pose, rotation_z
 
 #: Intended-supporter index meaning "the ground".
@@ -27,7 +28,7 @@ GROUND = -1
 
 
 @dataclass(frozen=True)
-class TemplateParams:
+class TemplateParams(Params):
     """Placement parameters shared by every template.
 
     Attributes
@@ -71,6 +72,8 @@ class TemplateParams:
         Largest height difference (m) of two different bridge supports.
     """
 
+    _label = "template parameters"
+
     gap_min: float = 0.002
     gap_max: float = 0.005
     clearance: float = 0.03
@@ -93,16 +96,6 @@ class TemplateParams:
     bridge_gap_fraction: float = 0.25
     bridge_overlap_min: float = 0.035
     max_height_difference: float = 0.015
-
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "TemplateParams":
-        """Build from a config mapping; unknown keys raise ``ValueError`` naming them."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown template parameters {unknown}; known: {sorted(known)}")
-        return cls(**d)
 
 
 @dataclass

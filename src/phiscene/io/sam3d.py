@@ -53,13 +53,14 @@ from __future__ import annotations
 
 import logging
 import shutil
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
 from phiscene.atomic import atomic_path, write_json
 from phiscene.errors import InputError
+from phiscene.params import Params
 from phiscene.scene import Scene, SceneObject, load_scene, save_scene
 from phiscene.tolerances import TOL
 from phiscene.transforms import decompose, invert, matrix_to_quat_wxyz, quat_wxyz_to_matrix
@@ -76,7 +77,7 @@ IMPORT_FORMAT = "phiscene.sam3d_import/1"
 
 
 @dataclass(frozen=True)
-class Sam3dParams:
+class Sam3dParams(Params):
     """Options of :func:`import_sam3d`.
 
     Attributes
@@ -94,20 +95,13 @@ class Sam3dParams:
         Seed of the surface sampling.
     """
 
+    _label = "SAM 3D import parameters"
+
     unit_scale: float = 1.0
     max_tilt_deg: float = 60.0
     floor_tolerance: float = 0.005
     samples_per_object: int = 2000
     seed: int = 0
-
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "Sam3dParams":
-        """Build from a mapping; unknown keys raise ``ValueError``."""
-        d = dict(d or {})
-        unknown = sorted(set(d) - {f.name for f in fields(cls)})
-        if unknown:
-            raise ValueError(f"unknown SAM 3D import parameters {unknown}; known: {[f.name for f in fields(cls)]}")
-        return cls(**d)
 
 
 @dataclass(frozen=True)

@@ -38,12 +38,13 @@ Units: metres, degrees, pixels.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
 from phiscene.errors import InputError
+from phiscene.params import Params
 from phiscene.scene import Scene, SceneObject
 from phiscene.transforms import decompose, rotation_angle, transform_points
 
@@ -54,7 +55,7 @@ ANCHORS = ("com", "origin")
 
 
 @dataclass(frozen=True)
-class AlignmentParams:
+class AlignmentParams(Params):
     """Parameters of the reference alignment metrics (config ``metrics.alignment``).
 
     Attributes
@@ -74,6 +75,9 @@ class AlignmentParams:
         (default 1: absent means no pixel at all).
     """
 
+    _label = "alignment parameters"
+    _coerce = {"min_pixels": int}
+
     reference: str = "segmentation"
     anchor: str = "com"
     min_pixels: int = 1
@@ -85,18 +89,6 @@ class AlignmentParams:
             raise ValueError(f"alignment anchor must be one of {list(ANCHORS)}, got {self.anchor!r}")
         if int(self.min_pixels) < 1:
             raise ValueError(f"alignment min_pixels must be >= 1, got {self.min_pixels!r}")
-
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "AlignmentParams":
-        """Build from a config mapping; unknown keys raise ``ValueError`` naming them."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown alignment parameters {unknown}; known: {sorted(known)}")
-        if "min_pixels" in d:
-            d["min_pixels"] = int(d["min_pixels"])
-        return cls(**d)
 
 
 def mask_iou(a: np.ndarray, b: np.ndarray) -> float:

@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import math
 import zlib
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -52,6 +52,7 @@ import numpy as np
 
 from phiscene.errors import InputError
 from phiscene.meshes import sample_surface
+from phiscene.params import Params
 from phiscene.sim.settings import SimSettings
 from phiscene.transforms import decompose, rotation_angle
 
@@ -65,7 +66,7 @@ GROUND = "ground"
 
 
 @dataclass(frozen=True)
-class PhysicalParams:
+class PhysicalParams(Params):
     """Parameters of the physical metrics (config ``metrics.physical``).
 
     Attributes
@@ -82,6 +83,8 @@ class PhysicalParams:
         Frames of ``SimSettings.frame_dt`` simulated for the drift (paper: 120).
     """
 
+    _label = "physical metric parameters"
+
     samples: int = 2048
     seed: int = 0
     include_ground: bool = True
@@ -95,19 +98,6 @@ class PhysicalParams:
             raise ValueError(f"frames must be >= 0, got {self.frames}")
         if not (math.isfinite(self.upward_offset) and self.upward_offset >= 0.0):
             raise ValueError(f"upward_offset must be finite and >= 0, got {self.upward_offset}")
-
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "PhysicalParams":
-        """Build from a config mapping; unknown keys raise ``ValueError`` naming them."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown physical metric parameters {unknown}; known: {sorted(known)}")
-        return cls(**d)
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 # -- static contact validity -----------------------------------------------------------------------------------------

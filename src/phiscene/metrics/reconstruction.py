@@ -45,12 +45,13 @@ Protocol choices where the paper is silent, and how MIDI-3D differs:
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from phiscene.errors import InputError
+from phiscene.params import Params
 from phiscene.scene import Scene
 
 #: The protocol's 1e-8 in ``F = 2PR / (P + R + 1e-8)`` and ``IoU = V_cap / (V_cup + 1e-8)``.
@@ -58,7 +59,7 @@ PROTOCOL_EPS = 1e-8
 
 
 @dataclass(frozen=True)
-class ReconParams:
+class ReconParams(Params):
     """Parameters of the reconstruction metrics.
 
     Attributes
@@ -83,6 +84,8 @@ class ReconParams:
         Seed of the surface sampling (scene: ``seed``; k-th GT object: ``seed + 1 + k``).
     """
 
+    _label = "reconstruction metric parameters"
+
     points: int = 20480
     object_points: int = 20480
     tau: float = 0.1
@@ -101,19 +104,6 @@ class ReconParams:
         if bad:
             raise ValueError(f"invalid reconstruction parameters: "
                              + ", ".join(f"{k}={getattr(self, k)!r}" for k in bad))
-
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "ReconParams":
-        """Build from a config mapping; unknown keys raise ``ValueError`` naming them."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown reconstruction metric parameters {unknown}; known: {sorted(known)}")
-        return cls(**d)
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 # --------------------------------------------------------------------------- point-set primitives

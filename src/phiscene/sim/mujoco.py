@@ -58,7 +58,7 @@ Contacts (see :class:`MujocoParams`)
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
@@ -67,6 +67,7 @@ import numpy as np
 from phiscene.atomic import write_text
 from phiscene.errors import InputError
 from phiscene.inertia import RigidProps, rigid_props
+from phiscene.params import Params
 from phiscene.sim.settings import SimSettings
 from phiscene.tolerances import GRAVITY
 from phiscene.transforms import decompose, make_pose, matrix_to_quat_wxyz, rotation_angle, transform_points
@@ -97,7 +98,7 @@ class DriftParams(Protocol):
 
 
 @dataclass(frozen=True)
-class MujocoParams:
+class MujocoParams(Params):
     """MuJoCo-specific contact and solver settings (what pybullet has no counterpart for).
 
     Attributes
@@ -128,6 +129,9 @@ class MujocoParams:
         slowly below the friction limit; no-slip removes most of that creep.
     """
 
+    _label = "MuJoCo settings"
+    _coerce = {"solimp": lambda v: tuple(float(x) for x in v)}
+
     timeconst: float = 0.01
     dampratio: float = 1.0
     solimp: tuple[float, float, float, float, float] = (0.95, 0.99, 0.001, 0.5, 2.0)
@@ -139,27 +143,14 @@ class MujocoParams:
     tolerance: float = 1e-10
     noslip_iterations: int = 10
 
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "MujocoParams":
-        """Build from a config mapping; unknown keys or bad values raise ``ValueError`` naming them."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown MuJoCo settings {unknown}; known: {sorted(known)}")
-        if "solimp" in d:
-            d["solimp"] = tuple(float(x) for x in d["solimp"])
-        p = cls(**d)
-        if len(p.solimp) != 5:
-            raise ValueError(f"solimp needs 5 values (d0, dwidth, width, midpoint, power), got {p.solimp}")
-        if p.cone not in ("elliptic", "pyramidal"):
-            raise ValueError(f"cone must be elliptic or pyramidal, got {p.cone!r}")
-        if p.integrator not in ("implicitfast", "implicit", "euler", "rk4"):
-            raise ValueError(f"integrator must be implicitfast, implicit, euler or rk4, got {p.integrator!r}")
-        return p
-
-    def to_dict(self) -> dict:
-        return asdict(self)
+    def check(self) -> None:
+        """Reject a ``solimp`` without 5 values and unknown ``cone`` / ``integrator`` names (``ValueError``)."""
+        if len(self.solimp) != 5:
+            raise ValueError(f"solimp needs 5 values (d0, dwidth, width, midpoint, power), got {self.solimp}")
+        if self.cone not in ("elliptic", "pyramidal"):
+            raise ValueError(f"cone must be elliptic or pyramidal, got {self.cone!r}")
+        if self.integrator not in ("implicitfast", "implicit", "euler", "rk4"):
+            raise ValueError(f"integrator must be implicitfast, implicit, euler or rk4, got {self.integrator!r}")
 
 
 # -- small helpers ----------------------------------------------------------------------

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
+
+from phiscene.params import Params
 
 
 @dataclass(frozen=True)
-class SimSettings:
+class SimSettings(Params):
     """Physical and numerical settings of a rigid-body world.
 
     Attributes
@@ -36,6 +38,8 @@ class SimSettings:
         use 0 and let the solver handle penetration recovery.
     """
 
+    _label = "simulation settings"
+
     frame_dt: float = 1.0 / 60.0
     substeps: int = 8
     friction: float = 0.8
@@ -47,16 +51,3 @@ class SimSettings:
     density: float = 500.0
     solver_iterations: int = 50
     collision_margin: float = 0.0
-
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "SimSettings":
-        """Build from a config mapping; unknown keys raise ``ValueError`` naming them."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown simulation settings {unknown}; known: {sorted(known)}")
-        return cls(**d)
-
-    def to_dict(self) -> dict:
-        return asdict(self)

@@ -1,22 +1,14 @@
-"""Base class of backend parameter dataclasses (``from_dict`` that rejects unknown keys)."""
+"""Base class of backend parameter dataclasses (``from_dict`` that rejects unknown keys).
+
+``BackendParams`` is :class:`phiscene.params.Params` under the name the topology backends
+(``topology.<backend>`` in ``config.yaml``) import; unknown keys raise
+``ValueError("unknown <ClassName> keys [...]; known: [...]")``.
+"""
 
 from __future__ import annotations
 
-from dataclasses import asdict, fields
+from phiscene.params import Params
 
+BackendParams = Params
 
-class BackendParams:
-    """Mixin for frozen parameter dataclasses filled from ``config.yaml`` (``topology.<backend>``)."""
-
-    @classmethod
-    def from_dict(cls, d: dict | None):
-        """Build from a config mapping; unknown keys raise ``ValueError`` naming them."""
-        d = dict(d or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(d) - known)
-        if unknown:
-            raise ValueError(f"unknown {cls.__name__} keys {unknown}; known: {sorted(known)}")
-        return cls(**d)
-
-    def to_dict(self) -> dict:
-        return asdict(self)
+__all__ = ["BackendParams"]
