@@ -9,7 +9,6 @@ grounded end to end and their result is checked against an analytic answer.
 """
 
 import json
-import logging
 import warnings
 
 import pytest
@@ -25,16 +24,8 @@ GRACEFUL = [c for c in CASES if c.graceful]
 
 
 @pytest.fixture(autouse=True)
-def keep_logging():
-    """The CLI and the job wrapper reconfigure the root logger; give pytest its handlers back."""
-    root = logging.getLogger()
-    handlers, level = list(root.handlers), root.level
-    yield
-    for h in root.handlers:
-        if h not in handlers:
-            h.close()
-    root.handlers[:] = handlers
-    root.setLevel(level)
+def _restore_logging(keep_logging):
+    """Every test here runs code that reconfigures logging (see conftest.keep_logging)."""
 
 
 def config_file(tmp_path, case: Case, root) -> str:

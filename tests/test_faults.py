@@ -24,15 +24,8 @@ from phiscene.transforms import make_pose
 
 
 @pytest.fixture(autouse=True)
-def keep_logging():
-    root = logging.getLogger()
-    handlers, level = list(root.handlers), root.level
-    yield
-    for h in root.handlers:
-        if h not in handlers:
-            h.close()
-    root.handlers[:] = handlers
-    root.setLevel(level)
+def _restore_logging(keep_logging):
+    """Every test here runs code that reconfigures logging (see conftest.keep_logging)."""
 
 
 @pytest.fixture
