@@ -24,10 +24,8 @@ def report_topology(wildcards):
 
 
 def demo_gifs():
-    """Demo GIFs the report shows: results/demo/{suite}/{scene}.gif of the (suite, scene) pairs of
-    `demo_scenes()` (export_common.smk); none when the workflow defines no such function."""
-    lister = globals().get("demo_scenes")
-    return [f"results/demo/{suite}/{scene}.gif" for suite, scene in (lister() if lister else [])]
+    """Demo GIFs the report shows: results/demo/{suite}/{scene}.gif of `demo_scenes()` (export_common.smk)."""
+    return [f"results/demo/{suite}/{scene}.gif" for suite, scene in demo_scenes()]
 
 
 def report_targets():
