@@ -21,12 +21,12 @@ from phiscene.bench.degrade import DegradeParams, degrade_scene
 from phiscene.bench.groundtruth import GTParams, ground_truth, release
 from phiscene.bench.render import colors_to_labels, load_png, project, read_camera, render_instance_mask
 from phiscene.bench.templates import TEMPLATES, template_names
-from phiscene.inertia import rigid_props
 from phiscene.meshes import save_mesh
+from simcheck import resimulate
+
 from phiscene.proxies import ProxyParams, proxy_for_mesh
 from phiscene.scene import Scene, SceneObject, load_scene
 from phiscene.schemas import read_json, validate
-from phiscene.sim.bullet import BulletWorld
 from phiscene.sim.settings import SimSettings
 from phiscene.transforms import decompose, make_pose, rotation_angle
 
@@ -120,19 +120,8 @@ def test_layout_and_formats(stack_scene):
 
 
 def _resimulate(scene: Scene, cache: Path, seconds: float = 2.0) -> tuple[float, float]:
-    """Independent re-simulation: every object dynamic on the ground; max drift (m, deg)."""
-    s = SimSettings()
-    with BulletWorld(s, cache) as world:
-        world.add_ground(scene.ground_height)
-        for o in scene.objects:
-            hulls = proxy_for_mesh(o.mesh_path, CONVEX, cache).hulls
-            world.add_body(o.id, hulls, o.pose, rigid_props(o.mesh(), hulls, s.density))
-        world.step_frames(int(round(seconds / s.frame_dt)))
-        dt, dr = 0.0, 0.0
-        for o in scene.objects:
-            (R0, t0, _), (R1, t1, _) = decompose(o.pose), decompose(world.pose(o.id))
-            dt, dr = max(dt, float(np.linalg.norm(t1 - t0))), max(dr, np.degrees(rotation_angle(R0, R1)))
-    return dt, dr
+    """Independent re-simulation with the convex proxies: max drift (m, deg) of any object."""
+    return resimulate(scene, cache, CONVEX, seconds)
 
 
 def test_gt_scene_is_at_rest(stack_scene, cache):

@@ -20,13 +20,13 @@ from phiscene.bench.furniture import DESIGNS, FURNITURE_CYCLE, TOP_CATEGORIES, d
 from phiscene.bench.render import project, read_camera
 from phiscene.bench.rooms import ROOMS_DEFAULTS, Footprint, separation
 from phiscene.bench.templates import TEMPLATES, TemplateParams, template_names
-from phiscene.inertia import rigid_props
-from phiscene.proxies import ProxyParams, proxy_for_mesh
+from simcheck import resimulate
+
+from phiscene.proxies import ProxyParams
 from phiscene.scene import Scene, load_scene
 from phiscene.schemas import read_json
-from phiscene.sim.bullet import BulletWorld
 from phiscene.sim.settings import SimSettings
-from phiscene.transforms import decompose, make_pose, rotation_angle, rotation_z
+from phiscene.transforms import make_pose, rotation_angle, rotation_z
 
 #: A bedroom of six objects: bed, two nightstands, wardrobe, and (top_object_p = 1) two small objects.
 BEDROOM = {"n_assets": 16, "n_objects": [6, 6], "templates": ["bedroom"], "template": {"top_object_p": 1.0}}
@@ -191,19 +191,8 @@ def test_suite_defaults_merge():
 
 
 def _resimulate(scene: Scene, cache: Path, seconds: float = 2.0) -> tuple[float, float]:
-    """Independent re-simulation with the CoACD proxies: max drift (m, deg) of any object."""
-    s = SimSettings()
-    with BulletWorld(s, cache) as world:
-        world.add_ground(scene.ground_height)
-        for o in scene.objects:
-            hulls = proxy_for_mesh(o.mesh_path, COACD, cache).hulls
-            world.add_body(o.id, hulls, o.pose, rigid_props(o.mesh(), hulls, s.density))
-        world.step_frames(int(round(seconds / s.frame_dt)))
-        dt, dr = 0.0, 0.0
-        for o in scene.objects:
-            (R0, t0, _), (R1, t1, _) = decompose(o.pose), decompose(world.pose(o.id))
-            dt, dr = max(dt, float(np.linalg.norm(t1 - t0))), max(dr, np.degrees(rotation_angle(R0, R1)))
-    return dt, dr
+    """Independent re-simulation with the coacd proxies: max drift (m, deg) of any object."""
+    return resimulate(scene, cache, COACD, seconds)
 
 
 def test_bedroom_scene(bedroom, cache):

@@ -19,7 +19,7 @@ from PIL import Image
 
 from phiscene import report
 from phiscene.errors import InputError
-from phiscene.tables import PHYS_COLUMNS, TOPO_COLUMNS, average_rank, physical_table, write_table
+from phiscene.tables import PHYS_COLUMNS, TOPO_COLUMNS, average_rank, write_table
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -12,7 +12,6 @@ from __future__ import annotations
 import copy
 import os
 from dataclasses import dataclass, field
-from functools import cached_property
 from pathlib import Path
 
 import numpy as np

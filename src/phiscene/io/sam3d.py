@@ -62,7 +62,6 @@ from phiscene.atomic import atomic_path, write_json
 from phiscene.errors import InputError
 from phiscene.params import Params
 from phiscene.scene import Scene, SceneObject, load_scene, save_scene
-from phiscene.tolerances import TOL
 from phiscene.transforms import decompose, invert, matrix_to_quat_wxyz, quat_wxyz_to_matrix
 
 log = logging.getLogger(__name__)
