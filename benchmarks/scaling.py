@@ -105,8 +105,10 @@ def worker(stage: str, n: int, work: Path, cfg: dict) -> dict:
         "ground": lambda: pipeline.run_ground(p["initial"], p["topology"], p["proxies"], p["grounded"],
                                               p["ground_log"], cfg["assembly"], cfg["sim"], p["cache"],
                                               progress=lambda line: None),
-        "physical": lambda: pipeline.run_physical_metrics(p["grounded"], p["proxies"], p["physical"],
-                                                          cfg["metrics"]["physical"], cfg["sim"], p["cache"]),
+        "physical": lambda: pipeline.run_metrics(
+            [{"method": "phi_scene", "scene": p["grounded"], "out": p["physical"], "sections": ["physical"]}],
+            {"physical": cfg["metrics"]["physical"], "sim": cfg["sim"]}, proxies_path=p["proxies"],
+            cache_dir=p["cache"]),
     }
     calls["ground_warm"] = calls["ground"]
     if stage not in calls:
@@ -125,7 +127,7 @@ def worker(stage: str, n: int, work: Path, cfg: dict) -> dict:
                  "pairs_evaluated": sum(len(o["sdf_context"]) for o in objs),
                  "unsettled": len(rec["summary"]["unsettled"])}
     elif stage == "physical":
-        extra = {"pairs_evaluated": json.loads(p["physical"].read_text())["pairs_evaluated"]}
+        extra = {"pairs_evaluated": json.loads(p["physical"].read_text())["physical"]["pairs_evaluated"]}
     elif stage == "topology":
         extra = {"pairs_evaluated": topology_near_pairs(p["initial"], cfg)}
     elif stage == "proxies":

@@ -1,6 +1,6 @@
 """Scale-out: the cluster profiles, and a real run through an external batch queue.
 
-``workflow/profiles/cluster-generic-local`` submits every job with Snakemake's
+``profiles/cluster-generic-local`` submits every job with Snakemake's
 cluster-generic executor to ``tools/localq`` (a minimal queue on this machine);
 its tables must be byte-identical to a local run of the same config, and every
 job the local scheduler plans must have gone through the queue with the
@@ -20,7 +20,7 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 LOCALQ = ROOT / "tools/localq"
-PROFILES = ROOT / "workflow/profiles"
+PROFILES = ROOT / "profiles"
 TARGET = "results/tables/phys.csv"
 
 

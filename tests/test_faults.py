@@ -15,10 +15,12 @@ from phiscene import cli, tables
 from phiscene.errors import InputError, PhisceneError
 from phiscene.failures import FORMAT, FailedInput, failure_record, find_failures, read_failure
 from phiscene.meshes import save_mesh
+from phiscene.metrics.evaluate import FORMAT as METRICS_FORMAT
 from phiscene.proxies import ProxyParams, decompose, proxy_for_mesh, read_proxies, write_proxies
 from phiscene.runner import job
 from phiscene.scene import Scene, SceneObject, load_scene, save_scene
 from phiscene.sdf_grid import GridParams, build_grid, clear_memory_cache, sdf_grid
+from phiscene.topology.graph import SupportEdge, SupportGraph, save
 from phiscene.transforms import make_pose
 
 
@@ -147,18 +149,27 @@ def test_failures_command_lists_records(tmp_path, capsys):
 
 
 # -- tables count failed scenes --------------------------------------------------------------------------------------
-def _metric(path, **values):
+def _metric(path, record=None, **sections):
+    """A metrics file with the given sections (or ``record``, a failure record)."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(values))
+    data = record if record is not None else {"format": METRICS_FORMAT, "sections": sorted(sections), **sections}
+    path.write_text(json.dumps(data))
     return path
 
 
+def _graph(path, edges):
+    ids = sorted({t for _, t in edges})
+    return save(SupportGraph(objects=["ground", *ids], edges=[SupportEdge(a, b) for a, b in edges], order=ids),
+                path)
+
+
 def test_tables_count_failed_scenes(tmp_path):
-    rec = failure_record("physical metrics", "scene.json: objects[0].mesh: cannot read mesh")
+    rec = failure_record("metrics", "scene.json: objects[0].mesh: cannot read mesh")
     phys = {k: 0.0 for k in tables.PHYS_COLUMNS}
-    files = {"good": [_metric(tmp_path / "g0.json", **{**phys, "pen_depth": 1.0}),
-                      _metric(tmp_path / "g1.json", **{**phys, "pen_depth": 3.0})],
-             "flaky": [_metric(tmp_path / "f0.json", **{**phys, "pen_depth": 5.0}), _metric(tmp_path / "f1.json", **rec)]}
+    files = {"good": [_metric(tmp_path / "g0.json", physical={**phys, "pen_depth": 1.0}),
+                      _metric(tmp_path / "g1.json", physical={**phys, "pen_depth": 3.0})],
+             "flaky": [_metric(tmp_path / "f0.json", physical={**phys, "pen_depth": 5.0}),
+                       _metric(tmp_path / "f1.json", rec)]}
     df = tables.physical_table(files)
     assert df.loc["good", "pen_depth"] == 2.0 and df.loc["flaky", "pen_depth"] == 5.0  # means over successes
     assert df["n_scenes"].tolist() == [2, 2] and df["n_failed"].tolist() == [0, 1]
@@ -166,17 +177,24 @@ def test_tables_count_failed_scenes(tmp_path):
     assert "| flaky †" in md and "| good " in md and "good †" not in md
     assert "flaky: 1 of 2" in md
     # all scenes failed: NaN means, still a row
-    df = tables.physical_table({"dead": [_metric(tmp_path / "d.json", **rec)]})
+    df = tables.physical_table({"dead": [_metric(tmp_path / "d.json", rec)]})
     assert np.isnan(df.loc["dead", "pen_depth"]) and df.loc["dead", "n_failed"] == 1
-    # a joined table fails a scene that either source failed, and averages both sources over the same scenes
+    # a joined table averages both sections over the same scenes
     drift = {"drift_trans": 1.0, "drift_rot": 1.0}
-    mj = {"m": [_metric(tmp_path / "mj0.json", **drift), _metric(tmp_path / "mj1.json", **rec)]}
-    pb = {"m": [_metric(tmp_path / "pb0.json", **drift), _metric(tmp_path / "pb1.json", drift_trans=9.0, drift_rot=9.0)]}
-    df = tables.crosssim_table(pb, mj)
+    df = tables.crosssim_table({"m": [_metric(tmp_path / "c0.json", physical=drift, mujoco=drift),
+                                      _metric(tmp_path / "c1.json", rec)]})
     assert df.loc["m", "drift_trans_bullet"] == 1.0 and df.loc["m", "n_failed"] == 1
-    topo = tables.topology_table({"b": [_metric(tmp_path / "t0.json", tp=2, fp=0, fn=2, f1=0.5),
-                                        _metric(tmp_path / "t1.json", **rec)]})
-    assert topo.loc["b", "recall"] == 0.5 and topo.loc["b", "n_failed"] == 1 and topo.loc["b", "n_scenes"] == 2
+    # a file made for other tables is a clear error, not a KeyError
+    with pytest.raises(InputError, match="g0.json.*no 'mujoco' section"):
+        tables.crosssim_table({"good": files["good"]})
+    # the topology table scores the graphs; a backend's failure record is a failed scene
+    gt = [_graph(tmp_path / "gt0.json", [("ground", "a"), ("a", "b"), ("ground", "c"), ("c", "d")]),
+          _graph(tmp_path / "gt1.json", [("ground", "a")])]
+    pred0 = _graph(tmp_path / "p0.json", [("ground", "a"), ("a", "b"), ("ground", "c"), ("ground", "d")])
+    (tmp_path / "p1.json").write_text(json.dumps(rec))
+    topo = tables.topology_table({"b": [pred0, tmp_path / "p1.json"]}, gt)
+    assert topo.loc["b", "recall"] == 0.75 and topo.loc["b", "precision"] == 0.75
+    assert topo.loc["b", "n_failed"] == 1 and topo.loc["b", "n_scenes"] == 2
 
 
 # -- corrupted cache entries are detected by their hash and rebuilt ------------------------------------------------

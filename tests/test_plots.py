@@ -17,6 +17,8 @@ from phiscene import plots
 from phiscene.atomic import write_json
 from phiscene.bench.render import RenderParams, camera_for, project, scene_bounds, segmentation_colors
 from phiscene.errors import InputError
+from phiscene.failures import record_for, write_failure
+from phiscene.metrics.evaluate import FORMAT as METRICS_FORMAT
 from phiscene.meshes import save_mesh
 from phiscene.scene import Scene, SceneObject
 from phiscene.topology.graph import SupportEdge, SupportGraph, save
@@ -78,12 +80,17 @@ def test_drift_distribution(tmp_path):
         for k in range(6):
             f = tmp_path / m / f"scene_{k:03d}.json"
             rot = 0.0 if (m, k) == ("gt", 0) else float(rng.uniform())  # one zero: symmetric-log axis
-            write_json(f, {"drift_trans": float(scale * rng.uniform(0.5, 2)), "drift_rot": rot})
+            write_json(f, {"format": METRICS_FORMAT, "sections": ["mujoco"],
+                           "mujoco": {"drift_trans": float(scale * rng.uniform(0.5, 2)), "drift_rot": rot}})
             files[m].append(f)
-    _twice(plots.drift_distribution, tmp_path, "drift.png", files)
+    write_failure([tmp_path / "failed.json"], record_for("metrics ours", InputError("x.json", None, "bad")))
+    files["ours"].append(tmp_path / "failed.json")  # a failed scene is left out, not an error
+    _twice(plots.drift_distribution, tmp_path, "drift.png", files, section="mujoco")
     assert _png_size(tmp_path / "a_drift.png") == (2 * 320, 360)
-    write_json(tmp_path / "bad.json", {"drift_trans": 0.1})
-    with pytest.raises(InputError, match="bad.json.*drift_rot"):
+    write_json(tmp_path / "bad.json", {"format": METRICS_FORMAT, "sections": ["mujoco"], "mujoco": {"drift_trans": 0.1}})
+    with pytest.raises(InputError, match="bad.json.*mujoco.drift_rot"):
+        plots.drift_distribution({"x": [tmp_path / "bad.json"]}, tmp_path / "y.png", section="mujoco")
+    with pytest.raises(InputError, match="bad.json.*no 'physical' section"):
         plots.drift_distribution({"x": [tmp_path / "bad.json"]}, tmp_path / "y.png")
 
 

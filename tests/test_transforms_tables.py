@@ -8,6 +8,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from phiscene.atomic import atomic_path, write_json
+from phiscene.metrics.evaluate import FORMAT as METRICS_FORMAT
 from phiscene.tables import average_rank, physical_table, to_markdown, PHYS_COLUMNS
 from phiscene.transforms import (decompose, invert, make_pose, matrix_to_quat_wxyz, quat_wxyz_to_matrix,
                                  rigidity_error, rotation_angle, transform_points)
@@ -61,7 +62,8 @@ def test_physical_table_means_over_scenes(tmp_path):
         files[m] = []
         for k, v in enumerate(vals):
             p = tmp_path / f"{m}{k}.json"
-            p.write_text(json.dumps({"pen_depth": v, "float_dist": v, "drift_trans": v, "drift_rot": 10 * v}))
+            p.write_text(json.dumps({"format": METRICS_FORMAT, "sections": ["physical"], "physical": {
+                "pen_depth": v, "float_dist": v, "drift_trans": v, "drift_rot": 10 * v}}))
             files[m].append(p)
     df = physical_table(files)
     assert df.loc["a", "pen_depth"] == pytest.approx(0.1) and df.loc["b", "drift_rot"] == pytest.approx(1.0)
@@ -73,14 +75,14 @@ def test_physical_table_means_over_scenes(tmp_path):
 def test_crosssim_and_runtime_tables(tmp_path):
     from phiscene.tables import crosssim_table, runtime_table
 
-    def js(name, **v):
+    def js(name, bullet, mujoco):
         p = tmp_path / f"{name}.json"
-        p.write_text(json.dumps(v))
+        p.write_text(json.dumps({"format": METRICS_FORMAT, "sections": ["physical", "mujoco"],
+                                 "physical": dict(zip(("drift_trans", "drift_rot"), bullet)),
+                                 "mujoco": dict(zip(("drift_trans", "drift_rot"), mujoco))}))
         return p
 
-    bullet = {"a": [js("ba", drift_trans=0.1, drift_rot=1.0)], "b": [js("bb", drift_trans=0.3, drift_rot=3.0)]}
-    mujoco = {"a": [js("ma", drift_trans=0.2, drift_rot=2.0)], "b": [js("mb", drift_trans=0.1, drift_rot=1.0)]}
-    df = crosssim_table(bullet, mujoco)
+    df = crosssim_table({"a": [js("a", (0.1, 1.0), (0.2, 2.0))], "b": [js("b", (0.3, 3.0), (0.1, 1.0))]})
     assert df.loc["a", "drift_trans_mujoco"] == 0.2 and df.loc["a", "drift_trans_bullet"] == 0.1
     assert df.loc["b", "avg_rank"] == 1 and df.loc["a", "avg_rank"] == 2  # ranked on MuJoCo only
     for stage, secs in [("methods/phi_scene", [1.0, 3.0]), ("proxies", [2.0])]:

@@ -70,15 +70,16 @@ def cmd_metrics(args: argparse.Namespace) -> None:
     import tempfile
 
     from phiscene import pipeline
+    from phiscene.metrics.evaluate import MetricInputs, scene_metrics
 
     cfg = _config(args.config)
     scene = _scene_file(Path(args.scene))
     cache = Path(args.cache_dir or cfg.get("cache_dir", Path(tempfile.gettempdir()) / "phiscene-cache"))
     with tempfile.TemporaryDirectory() as tmp:
         pipeline.run_proxies(scene, Path(tmp) / "p.npz", cfg.get("proxies", {}), cache)
-        pipeline.run_physical_metrics(scene, Path(tmp) / "p.npz", Path(tmp) / "m.json",
-                                      cfg.get("metrics", {}).get("physical", {}), cfg.get("sim", {}), cache)
-        result = json.loads((Path(tmp) / "m.json").read_text())
+        settings = {"physical": cfg.get("metrics", {}).get("physical", {}), "sim": cfg.get("sim", {})}
+        result = scene_metrics(scene, ["physical"], MetricInputs(proxies=Path(tmp) / "p.npz", cache_dir=cache),
+                               settings)["physical"]
     summary = {k: result[k] for k in ("pen_depth", "float_dist", "drift_trans", "drift_rot")}
     print(json.dumps(result if args.full else summary, indent=1))
 

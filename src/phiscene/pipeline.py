@@ -65,50 +65,6 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
     save_scene(settled, out_scene)
 
 
-def run_physical_metrics(scene_path: str | Path, proxies_path: str | Path, out_path: str | Path, params: dict,
-                         sim: dict, cache_dir: str | Path) -> None:
-    """Penetration, floating and post-simulation drift of one scene."""
-    from phiscene.metrics.physical import PhysicalParams, physical_metrics
-
-    scene = load_scene(scene_path)
-    result = physical_metrics(scene, read_proxies(proxies_path), PhysicalParams.from_dict(params),
-                              SimSettings.from_dict(sim), Path(cache_dir))
-    log.info("pen %.4f m, float %.4f m, drift %.4f m / %.2f deg", result["pen_depth"], result["float_dist"],
-             result["drift_trans"], result["drift_rot"])
-    write_json(out_path, result)
-
-
-def run_topology_metrics(predicted_path: str | Path, gt_path: str | Path, out_path: str | Path) -> None:
-    """Edge precision, recall and F1 of one predicted support graph."""
-    from phiscene.metrics.topology import file_scores
-
-    write_json(out_path, file_scores(predicted_path, gt_path).to_dict())
-
-
-
-
-def run_mujoco_metrics(scene_path: str | Path, proxies_path: str | Path, out_path: str | Path, params: dict,
-                       sim: dict, mujoco: dict) -> None:
-    """Post-simulation drift of one scene in MuJoCo (the cross-simulator check, paper Tab. 3)."""
-    from phiscene.metrics.physical import PhysicalParams
-    from phiscene.sim.mujoco import MujocoParams, drift_mujoco
-
-    scene = load_scene(scene_path)
-    result = drift_mujoco(scene, read_proxies(proxies_path), PhysicalParams.from_dict(params),
-                          SimSettings.from_dict(sim), MujocoParams.from_dict(mujoco))
-    log.info("MuJoCo drift %.4f m / %.2f deg", result["drift_trans"], result["drift_rot"])
-    write_json(out_path, result)
-
-
-def run_recon_metrics(scene_path: str | Path, gt_path: str | Path, out_path: str | Path, params: dict) -> None:
-    """Reconstruction metrics (MIDI-3D protocol) of one scene against its ground truth."""
-    from phiscene.metrics.reconstruction import reconstruction_metrics_file
-
-    result = reconstruction_metrics_file(scene_path, gt_path, out_path, params)
-    log.info("scene CD %.4f, F %.3f, object CD %.4f, F %.3f, bbox IoU %.3f", result["scene_cd"],
-             result["scene_fscore"], result["object_cd"], result["object_fscore"], result["bbox_iou"])
-
-
 def run_baseline(kind: str, scene_path: str | Path, out_scene: str | Path, out_log: str | Path, params: dict,
                  sim: dict, cache_dir: str | Path, proxies_path: str | Path | None = None,
                  topology_path: str | Path | None = None) -> None:
@@ -160,13 +116,32 @@ def run_external(pred_dir: str | Path, initial_path: str | Path, out_scene: str 
     write_json(out_log, record)
 
 
-def run_alignment_metrics(scene_path: str | Path, initial_path: str | Path, reference_dir: str | Path,
-                          out_path: str | Path, params: dict) -> None:
-    """Reference alignment (per-object mask IoU against the reference segmentation, pose change)."""
-    from phiscene.metrics.alignment import AlignmentParams, alignment_metrics
+def run_metrics(tasks: list[dict], settings: dict, proxies_path: str | Path | None = None,
+                gt_path: str | Path | None = None, initial_path: str | Path | None = None,
+                reference_dir: str | Path | None = None, cache_dir: str | Path | None = None,
+                name: str = "metrics") -> dict:
+    """Metrics files of one scene's methods (:func:`phiscene.metrics.evaluate.methods_metrics`).
 
-    result = alignment_metrics(load_scene(scene_path), load_scene(initial_path), Path(reference_dir),
-                               AlignmentParams.from_dict(params))
-    log.info("mask IoU %.3f, pose change %.4f m / %.2f deg", result["mask_iou"], result["pose_change_trans"],
-             result["pose_change_rot"])
-    write_json(out_path, result)
+    Parameters
+    ----------
+    tasks
+        Per method: ``method``, ``scene`` (its ``scene.json``), ``out`` (the metrics JSON to write),
+        ``sections`` and optionally ``proxies`` (its own).
+    settings
+        Parameter mappings by name (``physical``, ``sim``, ``mujoco``, ``alignment``, ``recon``).
+    proxies_path, gt_path, initial_path, reference_dir, cache_dir
+        The shared inputs the sections need (:func:`phiscene.metrics.evaluate.required_inputs`).
+    name
+        Job name for the log and failure records.
+
+    Returns
+    -------
+    dict
+        Method -> whether its metrics (``True``) or a failure record (``False``) was written.
+    """
+    from phiscene.metrics.evaluate import MetricInputs, MetricTask, methods_metrics
+
+    inputs = MetricInputs(proxies=proxies_path, gt=gt_path, initial=initial_path, reference_dir=reference_dir,
+                          cache_dir=cache_dir)
+    todo = [MetricTask(t["method"], t["scene"], t["out"], tuple(t["sections"]), t.get("proxies")) for t in tasks]
+    return methods_metrics(todo, inputs, settings, name)

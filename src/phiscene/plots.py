@@ -158,16 +158,23 @@ def drift_panel_width(n_methods: int) -> int:
     return max(320, 100 * n_methods)
 
 
-def _read_drift(path: Path) -> tuple[float, float]:
+def _read_drift(path: Path, section: str) -> tuple[float, float] | None:
+    """``(drift_trans, drift_rot)`` of one metrics file's section; ``None`` for a failed scene's record."""
+    from phiscene.failures import is_failure_record
+    from phiscene.metrics.evaluate import read_section
+
     try:
         data = json.loads(Path(path).read_text())
     except (OSError, ValueError) as exc:
         raise InputError(path, None, f"cannot read metric file ({type(exc).__name__}: {str(exc)[:120]})") from None
+    values = read_section(data, section, path)
+    if is_failure_record(values):
+        return None
     out = []
     for key in ("drift_trans", "drift_rot"):
-        v = data.get(key) if isinstance(data, dict) else None
+        v = values.get(key)
         if not isinstance(v, (int, float)) or isinstance(v, bool):
-            raise InputError(path, key, "missing or not a number")
+            raise InputError(path, f"{section}.{key}", "missing or not a number")
         out.append(float(v))
     return out[0], out[1]
 
@@ -184,17 +191,21 @@ def _value_scale(ax, values: np.ndarray) -> None:
 
 
 def drift_distribution(metric_files_by_method: dict[str, list[str | Path]], out_png: str | Path,
-                       seed: int = 0) -> Path:
+                       seed: int = 0, section: str = "physical") -> Path:
     """Per-scene distribution of the drift metrics per method: box plot plus the scenes as points.
 
     Parameters
     ----------
     metric_files_by_method
-        Method name -> per-scene physical metric JSON files (keys ``drift_trans`` m, ``drift_rot`` deg).
+        Method name -> per-scene metrics files (:mod:`phiscene.metrics.evaluate`); failed scenes'
+        records are left out (the tables count them).
     out_png
         Output figure.
     seed
         Seed of the horizontal jitter of the points.
+    section
+        The section whose ``drift_trans`` (m) and ``drift_rot`` (deg) are shown: ``physical`` (pybullet)
+        or ``mujoco``.
 
     Returns
     -------
@@ -204,13 +215,15 @@ def drift_distribution(metric_files_by_method: dict[str, list[str | Path]], out_
     Raises
     ------
     InputError
-        A metric file that is unreadable or lacks a drift value.
+        A metric file that is unreadable, not a metrics file, or lacks the section or a drift value.
     """
     methods = list(metric_files_by_method)
     if not methods:
         raise ValueError("drift_distribution needs at least one method")
-    data = {m: np.array([_read_drift(Path(p)) for p in metric_files_by_method[m]], dtype=float).reshape(-1, 2)
-            for m in methods}
+    data = {}
+    for m in methods:
+        values = [_read_drift(Path(p), section) for p in metric_files_by_method[m]]
+        data[m] = np.array([v for v in values if v is not None], dtype=float).reshape(-1, 2)
     rng = np.random.default_rng(seed)
     colors = _method_colors(len(methods))
     with _rc():

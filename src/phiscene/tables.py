@@ -10,9 +10,9 @@ Failed scenes. A per-scene metric file may be a failure record
 process that scene. Such a scene is never dropped silently: ``n_scenes``
 counts every scene of the suite, ``n_failed`` the failed ones, and the metric
 columns are means over the ``n_scenes - n_failed`` scenes that succeeded
-(NaN when none did). A table that joins two metric sources (cross-simulator,
-ablation) counts a scene as failed when either source failed on it and
-averages both over the same remaining scenes. In the Markdown, a row with
+(NaN when none did). A scene's metrics file holds every section the tables
+read, so a table that joins two sections (cross-simulator, ablation) averages
+both over the same scenes. In the Markdown, a row with
 failures is marked with a dagger and a footnote says how many scenes its
 means leave out, since they are then not comparable with the other rows.
 """
@@ -46,6 +46,13 @@ def _read(path: str | Path) -> dict:
     return json.loads(Path(path).read_text())
 
 
+def _values(path: str | Path, section: str) -> dict:
+    """One section of a per-scene metrics file (:func:`phiscene.metrics.evaluate.read_section`)."""
+    from phiscene.metrics.evaluate import read_section
+
+    return read_section(_read(path), section, path)
+
+
 def average_rank(df: pd.DataFrame, directions: dict[str, str]) -> pd.Series:
     """The paper's average rank over ``directions``' columns (1 = best; ties share the better rank)."""
     ranks = [df[c].rank(method="min", ascending=(d == "min")) for c, d in directions.items()]
@@ -57,21 +64,18 @@ def failed_scenes(files: dict[str, list[str | Path]]) -> dict[str, set[int]]:
     return {name: {i for i, p in enumerate(paths) if is_failure_record(_read(p))} for name, paths in files.items()}
 
 
-def _union(*failed: dict[str, set[int]]) -> dict[str, set[int]]:
-    names = set().union(*failed)
-    return {n: set().union(*(f.get(n, set()) for f in failed)) for n in names}
-
-
-def mean_table(files: dict[str, list[str | Path]], keys: list[str], suffix: str = "",
+def mean_table(files: dict[str, list[str | Path]], keys: list[str], section: str, suffix: str = "",
                failed: dict[str, set[int]] | None = None) -> pd.DataFrame:
-    """Per row name, the mean over its successful scenes of each key.
+    """Per row name, the mean over its successful scenes of each key of a metrics section.
 
     Parameters
     ----------
     files
-        Row name -> per-scene metric JSON files (failure records allowed).
+        Row name -> per-scene metrics files (:mod:`phiscene.metrics.evaluate`; failure records allowed).
     keys
         Metric keys to average (columns ``key + suffix``).
+    section
+        The metrics file section holding ``keys``.
     failed
         Row name -> positions of scenes to count as failed (defaults to :func:`failed_scenes` of ``files``).
 
@@ -83,7 +87,7 @@ def mean_table(files: dict[str, list[str | Path]], keys: list[str], suffix: str 
     rows = []
     for name, paths in files.items():
         bad = failed.get(name, set())
-        vals = [_read(p) for i, p in enumerate(paths) if i not in bad]
+        vals = [_values(p, section) for i, p in enumerate(paths) if i not in bad]
         row = {"method": name}
         for k in keys:
             row[k + suffix] = float(np.mean([v[k] for v in vals])) if vals else float("nan")
@@ -99,29 +103,42 @@ def physical_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
     Parameters
     ----------
     files
-        Method name -> per-scene physical metric JSON files.
+        Method name -> per-scene metrics files (``physical`` section).
     """
-    df = mean_table(files, list(PHYS_COLUMNS))
+    df = mean_table(files, list(PHYS_COLUMNS), "physical")
     df["avg_rank"] = average_rank(df, PHYS_COLUMNS)
     return df
 
 
-def crosssim_table(bullet: dict[str, list[str | Path]], mujoco: dict[str, list[str | Path]]) -> pd.DataFrame:
-    """Tab. 3: post-simulation drift in MuJoCo (ranked) beside the same protocol in pybullet."""
+def crosssim_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
+    """Tab. 3: post-simulation drift in MuJoCo (ranked) beside the same protocol in pybullet.
+
+    Parameters
+    ----------
+    files
+        Method name -> per-scene metrics files (``mujoco`` and ``physical`` sections).
+    """
     keys = ["drift_trans", "drift_rot"]
-    failed = _union(failed_scenes(mujoco), failed_scenes(bullet))
-    mj = mean_table(mujoco, keys, "_mujoco", failed)
-    pb = mean_table(bullet, keys, "_bullet", failed).drop(columns=["n_scenes", "n_failed"])
+    failed = failed_scenes(files)
+    mj = mean_table(files, keys, "mujoco", "_mujoco", failed)
+    pb = mean_table(files, keys, "physical", "_bullet", failed).drop(columns=["n_scenes", "n_failed"])
     df = mj.join(pb)[[*CROSSSIM_COLUMNS, "drift_trans_bullet", "drift_rot_bullet", "n_scenes", "n_failed"]]
     df["avg_rank"] = average_rank(df, CROSSSIM_COLUMNS)
     return df
 
 
-def ablation_table(physical: dict[str, list[str | Path]], alignment: dict[str, list[str | Path]]) -> pd.DataFrame:
-    """Tab. 6: reference alignment (mean per-object mask IoU) and physical metrics per method, with pose change."""
-    failed = _union(failed_scenes(physical), failed_scenes(alignment))
-    align = mean_table(alignment, ["mask_iou", "pose_change_trans", "pose_change_rot"], failed=failed)
-    df = align.drop(columns=["n_scenes", "n_failed"]).join(mean_table(physical, list(PHYS_COLUMNS), failed=failed))
+def ablation_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
+    """Tab. 6: reference alignment (mean per-object mask IoU) and physical metrics per method, with pose change.
+
+    Parameters
+    ----------
+    files
+        Method name -> per-scene metrics files (``alignment`` and ``physical`` sections).
+    """
+    failed = failed_scenes(files)
+    align = mean_table(files, ["mask_iou", "pose_change_trans", "pose_change_rot"], "alignment", failed=failed)
+    df = align.drop(columns=["n_scenes", "n_failed"]).join(mean_table(files, list(PHYS_COLUMNS), "physical",
+                                                                      failed=failed))
     df = df[[*ABLATION_COLUMNS, "pose_change_trans", "pose_change_rot", "n_scenes", "n_failed"]]
     df["avg_rank"] = average_rank(df, ABLATION_COLUMNS)
     return df
@@ -129,7 +146,7 @@ def ablation_table(physical: dict[str, list[str | Path]], alignment: dict[str, l
 
 def recon_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
     """Tab. 1: reconstruction metrics against ground truth (MIDI-3D protocol), means over scenes."""
-    df = mean_table(files, [*RECON_COLUMNS, *RECON_EXTRA])
+    df = mean_table(files, [*RECON_COLUMNS, *RECON_EXTRA], "recon")
     df["avg_rank"] = average_rank(df, RECON_COLUMNS)
     return df
 
@@ -158,24 +175,37 @@ def runtime_table(benchmark_dir: str | Path) -> pd.DataFrame:
                          "mean_cpu_s": g["cpu_s"].mean(), "max_rss_mb": g["max_rss_mb"].max()})
 
 
-def topology_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
+def topology_table(files: dict[str, list[str | Path]], gt_files: list[str | Path]) -> pd.DataFrame:
     """Tab. 7: per backend the micro-averaged edge precision, recall and F1 (plus the macro F1 over scenes).
 
-    Failed scenes are counted in ``n_failed`` and left out of the sums (see the module notes).
+    Parameters
+    ----------
+    files
+        Backend -> predicted support graphs (topology JSON), one per scene, in the order of ``gt_files``.
+    gt_files
+        The scenes' ground-truth support graphs.
+
+    A predicted graph that is a failure record (the backend failed on the scene) is counted in
+    ``n_failed`` and left out of the sums (see the module notes).
     """
+    from phiscene.failures import FailedInput
+    from phiscene.metrics.topology import file_scores, scores_from_counts
+
     rows = []
     for backend, paths in files.items():
-        records = [_read(p) for p in paths]
-        vals = [v for v in records if not is_failure_record(v)]
-        tp = sum(v["tp"] for v in vals)
-        fp = sum(v["fp"] for v in vals)
-        fn = sum(v["fn"] for v in vals)
-        p = tp / (tp + fp) if tp + fp else 1.0
-        r = tp / (tp + fn) if tp + fn else 1.0
-        f1 = 2 * p * r / (p + r) if p + r else 0.0
-        rows.append({"backend": backend, "precision": p, "recall": r, "f1": f1,
-                     "f1_macro": float(np.mean([v["f1"] for v in vals])) if vals else float("nan"),
-                     "tp": tp, "fp": fp, "fn": fn, "n_scenes": len(records), "n_failed": len(records) - len(vals)})
+        if len(paths) != len(gt_files):
+            raise ValueError(f"topology table: {backend} has {len(paths)} graphs for {len(gt_files)} scenes")
+        scores = []
+        for pred, gt in zip(paths, gt_files):
+            try:
+                scores.append(file_scores(pred, gt))
+            except FailedInput:
+                continue
+        micro = scores_from_counts(sum(v.tp for v in scores), sum(v.fp for v in scores), sum(v.fn for v in scores))
+        rows.append({"backend": backend, "precision": micro.precision, "recall": micro.recall, "f1": micro.f1,
+                     "f1_macro": float(np.mean([v.f1 for v in scores])) if scores else float("nan"),
+                     "tp": micro.tp, "fp": micro.fp, "fn": micro.fn, "n_scenes": len(paths),
+                     "n_failed": len(paths) - len(scores)})
     df = pd.DataFrame(rows).set_index("backend")
     df["avg_rank"] = average_rank(df, TOPO_COLUMNS)
     return df

@@ -10,7 +10,7 @@ a shared filesystem) can be exercised without a cluster::
     localq.py cancel JOBID...    terminate jobs (their whole process group)
 
 The wrappers ``submit``, ``status`` and ``cancel`` beside this file are what
-``workflow/profiles/cluster-generic-local`` names (the executor calls the
+``profiles/cluster-generic-local`` names (the executor calls the
 cancel command without arguments of its own, so each needs its own file).
 
 State lives in ``$LOCALQ_DIR`` (default ``.snakemake/localq`` under the

@@ -50,6 +50,14 @@ def check_method_kinds():
             )
 
 
+def method_scene(method, suite, scene):
+    """The scene.json of a method: a reference method's is the benchmark scene itself (no copy job)."""
+    spec = config["methods"][method]
+    if spec["kind"] == "reference":
+        return f"results/scenes/{suite}/{scene}/{spec['source']}/scene.json"
+    return f"results/methods/{method}/{suite}/{scene}/scene.json"
+
+
 def proxies_of(wildcards):
     """Proxies for the simulated metrics of a method's scene."""
     if config["methods"][wildcards.method]["kind"] in OWN_MESH_KINDS:
@@ -62,11 +70,87 @@ def alternation(names):
     return "|".join(names) if names else "(?!x)x"
 
 
-def table_inputs(metric, table, names):
-    """Per-name lists of metric files of every scene of the table's suite."""
+#: Metric sections (phiscene.metrics.evaluate.SECTIONS) each table reads from a scene's metrics files.
+TABLE_SECTIONS = {"phys": ["physical"], "crosssim": ["physical", "mujoco"], "ablation": ["physical", "alignment"],
+                  "recon": ["recon"]}
+
+
+def metric_groups(suite):
+    """Methods with metrics files on a suite, grouped by the tables that show them: {"phys_crosssim": [...], ...}.
+
+    One job per scene computes a group's files, so a table pulls in only the methods it shows, and a change to
+    one method reruns only its group's jobs.
+    """
+    groups = {}
+    for m in config["methods"]:
+        tables = [t for t in TABLE_SECTIONS if config["tables"][t]["suite"] == suite and m in config["tables"][t]["methods"]]
+        if tables:
+            groups.setdefault("_".join(tables), []).append(m)
+    return groups
+
+
+def metric_sections(method, suite):
+    """Sections of a method's metrics files on a suite: those of every table that shows the method there."""
+    sections = {s for t, needs in TABLE_SECTIONS.items() for s in needs
+                if config["tables"][t]["suite"] == suite and method in config["tables"][t]["methods"]}
+    return [s for s in ("physical", "mujoco", "alignment", "recon") if s in sections]
+
+
+def metric_tasks(suite, methods):
+    """Per method: its sections, and whether it brings its own proxies (params of a metrics job)."""
+    return [{"method": m, "sections": metric_sections(m, suite),
+             "own_proxies": config["methods"][m]["kind"] in OWN_MESH_KINDS} for m in methods]
+
+
+def metric_settings(suite, methods):
+    """The settings the methods' metric sections read (a change reruns only the jobs that use it)."""
+    from phiscene.metrics.evaluate import SECTION_SETTINGS
+
+    names = {n for t in metric_tasks(suite, methods) for s in t["sections"] for n in SECTION_SETTINGS[s]}
+    return {n: (config["sim"] if n == "sim" else config["metrics"][n]) for n in sorted(names)}
+
+
+def metrics_inputs(suite, methods, scene):
+    """The methods' scenes, plus what their metric sections read (phiscene.metrics.evaluate.required_inputs)."""
+    from phiscene.metrics.evaluate import required_inputs
+
+    base = f"results/scenes/{suite}/{scene}"
+    inputs, need = {}, set()
+    for t in metric_tasks(suite, methods):
+        m = t["method"]
+        inputs[f"scene_{m}"] = method_scene(m, suite, scene)
+        wanted = set(required_inputs(t["sections"]))
+        if "proxies" in wanted and t["own_proxies"]:
+            inputs[f"proxies_{m}"] = f"results/methods/{m}/{suite}/{scene}/proxies.npz"
+            wanted.discard("proxies")
+        need |= wanted
+    if "proxies" in need:
+        inputs["proxies"] = f"results/proxies/{suite}/{scene}.npz"
+    if "gt" in need:
+        inputs["gt"] = f"{base}/gt/scene.json"
+    if "initial" in need:
+        inputs["initial"] = f"{base}/initial/scene.json"
+    if "reference_dir" in need:
+        inputs.update(image=f"{base}/reference/image.png", segmentation=f"{base}/reference/segmentation.png",
+                      camera=f"{base}/reference/camera.json")
+    return inputs
+
+
+def table_inputs(table, names=None):
+    """Per method: the metrics files of every scene of the table's suite."""
     suite = config["tables"][table]["suite"]
-    return {name: expand(f"results/metrics/{metric}/{name}/{suite}/{{scene}}.json", scene=scene_ids(suite))
-            for name in names}
+    names = config["tables"][table]["methods"] if names is None else names
+    return {name: expand(f"results/metrics/{name}/{suite}/{{scene}}.json", scene=scene_ids(suite)) for name in names}
+
+
+def topology_table_inputs(wildcards):
+    """Per backend the predicted support graphs of the topology table's suite, and the ground-truth graphs."""
+    suite = config["tables"]["topology"]["suite"]
+    scenes = scene_ids(suite)
+    inputs = {b: expand(f"results/topology/{b}/{suite}/{{scene}}.json", scene=scenes)
+              for b in config["tables"]["topology"]["backends"]}
+    inputs["gt_topology"] = expand(f"results/scenes/{suite}/{{scene}}/gt/topology.json", scene=scenes)
+    return inputs
 
 
 def topology_inputs(wildcards):

@@ -9,7 +9,7 @@ include: "export_common.smk"
 
 rule export_scene:
     input:
-        scene="results/methods/{method}/{suite}/{scene}/scene.json",
+        scene=lambda wc: method_scene(wc.method, wc.suite, wc.scene),
         proxies=proxies_of,
         topology=export_topology,
     output:

@@ -1,24 +1,6 @@
 # Methods: each writes results/methods/{method}/{suite}/{scene}/scene.json (the shared contract).
-# Reference rows (gt, initial) copy a benchmark scene; phi_scene-kind methods ground the initial scene.
-
-
-rule reference_method:
-    input:
-        scene=lambda wc: f"results/scenes/{wc.suite}/{wc.scene}/{config['methods'][wc.method]['source']}/scene.json",
-    output:
-        scene="results/methods/{method}/{suite}/{scene}/scene.json",
-    wildcard_constraints:
-        method=alternation(methods_of_kind("reference")),
-    log:
-        "results/logs/methods/{method}/{suite}/{scene}.log",
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=5,
-    conda:
-        ENV
-    script:
-        "../scripts/reference_method.py"
+# Reference rows (gt, initial) need no job: their scene is the benchmark scene (method_scene in common.smk).
+# phi_scene-kind methods ground the initial scene.
 
 
 rule phi_scene:

@@ -1,120 +1,33 @@
-# Per-scene metrics of any method's scene.json.
+# Per-scene metrics: results/metrics/{method}/{suite}/{scene}.json of every method a table shows on the suite,
+# each with the sections its tables read (phiscene.metrics.evaluate; see metric_groups in common.smk).
+# One job per scene computes the files of a group of methods (those shown by the same tables): the simulators and
+# mesh libraries take longer to import than most metrics take to compute, so one process per (method, scene)
+# would spend half its time importing. One rule per (suite, group), since the outputs differ between them.
 
+for _suite in config["suites"]:
+    for _group, _methods in metric_groups(_suite).items():
 
-rule physical_metrics:
-    input:
-        scene="results/methods/{method}/{suite}/{scene}/scene.json",
-        proxies=proxies_of,
-    output:
-        "results/metrics/physical/{method}/{suite}/{scene}.json",
-    params:
-        physical=config["metrics"]["physical"],
-        sim=config["sim"],
-        cache_dir=CACHE,
-        version=V.METRICS,
-    log:
-        "results/logs/metrics/physical/{method}/{suite}/{scene}.log",
-    benchmark:
-        "results/benchmarks/metrics/physical/{method}/{suite}/{scene}.tsv"
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=15,
-    conda:
-        ENV
-    script:
-        "../scripts/physical_metrics.py"
-
-
-rule topology_metrics:
-    input:
-        predicted="results/topology/{backend}/{suite}/{scene}.json",
-        gt="results/scenes/{suite}/{scene}/gt/topology.json",
-    output:
-        "results/metrics/topology/{backend}/{suite}/{scene}.json",
-    params:
-        version=V.METRICS,
-    log:
-        "results/logs/metrics/topology/{backend}/{suite}/{scene}.log",
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=5,
-    conda:
-        ENV
-    script:
-        "../scripts/topology_metrics.py"
-
-
-rule mujoco_metrics:
-    input:
-        scene="results/methods/{method}/{suite}/{scene}/scene.json",
-        proxies=proxies_of,
-    output:
-        "results/metrics/mujoco/{method}/{suite}/{scene}.json",
-    params:
-        physical=config["metrics"]["physical"],
-        sim=config["sim"],
-        mujoco=config["metrics"]["mujoco"],
-        version=V.METRICS,
-    log:
-        "results/logs/metrics/mujoco/{method}/{suite}/{scene}.log",
-    benchmark:
-        "results/benchmarks/metrics/mujoco/{method}/{suite}/{scene}.tsv"
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=15,
-    conda:
-        ENV
-    script:
-        "../scripts/mujoco_metrics.py"
-
-
-rule recon_metrics:
-    input:
-        scene="results/methods/{method}/{suite}/{scene}/scene.json",
-        gt="results/scenes/{suite}/{scene}/gt/scene.json",
-    output:
-        "results/metrics/recon/{method}/{suite}/{scene}.json",
-    params:
-        recon=config["metrics"]["recon"],
-        version=V.METRICS,
-    log:
-        "results/logs/metrics/recon/{method}/{suite}/{scene}.log",
-    benchmark:
-        "results/benchmarks/metrics/recon/{method}/{suite}/{scene}.tsv"
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=15,
-    conda:
-        ENV
-    script:
-        "../scripts/recon_metrics.py"
-
-
-rule alignment_metrics:
-    input:
-        scene="results/methods/{method}/{suite}/{scene}/scene.json",
-        initial="results/scenes/{suite}/{scene}/initial/scene.json",
-        image="results/scenes/{suite}/{scene}/reference/image.png",
-        segmentation="results/scenes/{suite}/{scene}/reference/segmentation.png",
-        camera="results/scenes/{suite}/{scene}/reference/camera.json",
-    output:
-        "results/metrics/alignment/{method}/{suite}/{scene}.json",
-    params:
-        alignment=config["metrics"]["alignment"],
-        version=V.METRICS,
-    log:
-        "results/logs/metrics/alignment/{method}/{suite}/{scene}.log",
-    benchmark:
-        "results/benchmarks/metrics/alignment/{method}/{suite}/{scene}.tsv"
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=15,
-    conda:
-        ENV
-    script:
-        "../scripts/alignment_metrics.py"
+        rule:
+            name:
+                f"metrics_{_suite}_{_group}"
+            input:
+                unpack(lambda wc, suite=_suite, methods=_methods: metrics_inputs(suite, methods, wc.scene)),
+            output:
+                [f"results/metrics/{m}/{_suite}/{{scene}}.json" for m in _methods],
+            params:
+                tasks=metric_tasks(_suite, _methods),
+                settings=metric_settings(_suite, _methods),
+                cache_dir=CACHE,
+                version=V.METRICS,
+            log:
+                f"results/logs/metrics/{_suite}/{_group}/{{scene}}.log",
+            benchmark:
+                f"results/benchmarks/metrics/{_group}/{_suite}/{{scene}}.tsv"
+            threads: 1
+            resources:
+                mem_mb=1500,
+                runtime=30,
+            conda:
+                ENV
+            script:
+                "../scripts/metrics.py"

@@ -87,8 +87,7 @@ rule report_bars:
 
 rule report_drift:
     input:
-        unpack(lambda wc: table_inputs(DRIFT_FIGURES[wc.engine][0], DRIFT_FIGURES[wc.engine][1],
-                                       config["tables"][DRIFT_FIGURES[wc.engine][1]]["methods"])),
+        unpack(lambda wc: table_inputs(DRIFT_FIGURES[wc.engine][1])),
     output:
         report("results/report/figures/drift_{engine}.png", caption="../report/drift.rst", category="Figures",
                subcategory="Drift per scene", labels={"simulator": "{engine}"}),
@@ -96,6 +95,7 @@ rule report_drift:
         engine=alternation(list(DRIFT_FIGURES)),
     params:
         methods=lambda wc: config["tables"][DRIFT_FIGURES[wc.engine][1]]["methods"],
+        section=lambda wc: DRIFT_FIGURES[wc.engine][0],
         seed=config["benchmark"]["seed"],
         version=V.REPORT,
     log:
@@ -113,7 +113,7 @@ rule report_drift:
 rule report_scene:
     input:
         initial="results/scenes/{suite}/{scene}/initial/scene.json",
-        method=f"results/methods/{REPORT_METHOD}/{{suite}}/{{scene}}/scene.json",
+        method=lambda wc: method_scene(REPORT_METHOD, wc.suite, wc.scene),
         camera="results/scenes/{suite}/{scene}/reference/camera.json",
         topology=report_topology,
     output:
@@ -137,7 +137,7 @@ rule report_scene:
 
 rule report_viewer:
     input:
-        scene=f"results/methods/{REPORT_METHOD}/{{suite}}/{{scene}}/scene.json",
+        scene=lambda wc: method_scene(REPORT_METHOD, wc.suite, wc.scene),
     output:
         report("results/report/viewers/{suite}/{scene}.html", caption="../report/viewer.rst", category="Scenes",
                subcategory="{suite}", labels={"scene": "{scene}", "view": "3D viewer"}),

@@ -3,7 +3,7 @@
 #: Tables the report shows (keys of phiscene.report.TABLES), in page order; the ones with a bar chart.
 REPORT_TABLES = ["phys", "crosssim", "recon", "topology", "ablation", "runtime"]
 BAR_TABLES = ["phys", "crosssim", "recon", "topology", "ablation"]
-#: Drift distributions: engine -> (per-scene metric, the table whose suite and methods it shows).
+#: Drift distributions: engine -> (metrics file section, the table whose suite and methods it shows).
 DRIFT_FIGURES = {"pybullet": ("physical", "phys"), "mujoco": ("mujoco", "crosssim")}
 REPORT_METHOD = config["report"]["method"]
 if REPORT_METHOD not in config["methods"]:

@@ -1,9 +1,9 @@
-# Paper tables as CSV + Markdown.
+# Paper tables as CSV + Markdown, from the per-scene metrics files (the topology table scores the graphs itself).
 
 
 rule phys_table:
     input:
-        unpack(lambda wc: table_inputs("physical", "phys", config["tables"]["phys"]["methods"])),
+        unpack(lambda wc: table_inputs("phys")),
     output:
         csv="results/tables/phys.csv",
         md="results/tables/phys.md",
@@ -24,7 +24,7 @@ rule phys_table:
 
 rule topology_table:
     input:
-        unpack(lambda wc: table_inputs("topology", "topology", config["tables"]["topology"]["backends"])),
+        unpack(topology_table_inputs),
     output:
         csv="results/tables/topology.csv",
         md="results/tables/topology.md",
@@ -45,9 +45,7 @@ rule topology_table:
 
 rule crosssim_table:
     input:
-        unpack(lambda wc: table_inputs("mujoco", "crosssim", config["tables"]["crosssim"]["methods"])),
-        unpack(lambda wc: {f"bullet_{k}": v for k, v in
-                           table_inputs("physical", "crosssim", config["tables"]["crosssim"]["methods"]).items()}),
+        unpack(lambda wc: table_inputs("crosssim")),
     output:
         csv="results/tables/crosssim.csv",
         md="results/tables/crosssim.md",
@@ -68,7 +66,7 @@ rule crosssim_table:
 
 rule recon_table:
     input:
-        unpack(lambda wc: table_inputs("recon", "recon", config["tables"]["recon"]["methods"])),
+        unpack(lambda wc: table_inputs("recon")),
     output:
         csv="results/tables/recon.csv",
         md="results/tables/recon.md",
@@ -111,9 +109,7 @@ rule runtime_table:
 
 rule ablation_table:
     input:
-        unpack(lambda wc: table_inputs("physical", "ablation", config["tables"]["ablation"]["methods"])),
-        unpack(lambda wc: {f"alignment_{k}": v for k, v in
-                           table_inputs("alignment", "ablation", config["tables"]["ablation"]["methods"]).items()}),
+        unpack(lambda wc: table_inputs("ablation")),
     output:
         csv="results/tables/ablation.csv",
         md="results/tables/ablation.md",

@@ -6,4 +6,5 @@ from phiscene.tables import TOPO_COLUMNS, topology_table, write_table
 sm = snakemake  # noqa: F821 (injected by Snakemake)
 with job("topology table", sm.log[0], sm.threads):
     files = {b: list(sm.input[b]) for b in sm.params.backends}
-    write_table(topology_table(files), sm.output.csv, sm.output.md, title="Support graph accuracy", directions=TOPO_COLUMNS)
+    write_table(topology_table(files, list(sm.input.gt_topology)), sm.output.csv, sm.output.md,
+                title="Support graph accuracy", directions=TOPO_COLUMNS)

@@ -1,0 +1,261 @@
+"""Every metric of one method's scene in one pass: the per-scene metrics file.
+
+A metrics file (``results/metrics/{method}/{suite}/{scene}.json``) holds the
+sections the tables need of that scene, each computed by its own module::
+
+    {"format": "phiscene.metrics/1", "sections": ["alignment", "physical"],
+     "physical": {...}, "alignment": {...}}
+
+=============  ======================================================  ==========================
+section        metrics                                                  needs
+=============  ======================================================  ==========================
+``physical``   penetration, floating, pybullet drift                    proxies, ``sim``
+``mujoco``     MuJoCo drift (cross-simulator check)                     proxies, ``sim``
+``alignment``  mask IoU against the reference segmentation, pose change initial scene, reference dir
+``recon``      reconstruction against ground truth (MIDI-3D protocol)   ground-truth scene
+=============  ======================================================  ==========================
+
+The workflow computes the files of every method of a scene in one job
+(:func:`methods_metrics`): importing the simulators and mesh libraries costs a
+process more than most sections' compute, so one process per scene, not per
+method and section, halves the benchmark's metric time. If any section of a
+method fails on that method's data, its whole file is a failure record
+(:mod:`phiscene.failures`), which the tables count in ``n_failed``; the other
+methods' files are unaffected.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from phiscene.errors import InputError
+from phiscene.failures import is_failure_record
+
+log = logging.getLogger(__name__)
+
+FORMAT = "phiscene.metrics/1"
+#: Sections of a metrics file, in the order they are computed.
+SECTIONS = ("physical", "mujoco", "alignment", "recon")
+#: Settings each section reads (keys of the ``settings`` mapping of :func:`scene_metrics`).
+SECTION_SETTINGS = {"physical": ("physical", "sim"), "mujoco": ("physical", "sim", "mujoco"),
+                    "alignment": ("alignment",), "recon": ("recon",)}
+
+
+@dataclass(frozen=True)
+class MetricTask:
+    """One method's metrics file of a scene.
+
+    Attributes
+    ----------
+    method
+        Method name (for the log and a failure record).
+    scene
+        The method's ``scene.json``.
+    out
+        The metrics file to write.
+    sections
+        Its sections (:data:`SECTIONS`).
+    proxies
+        The method's own proxies (methods that bring their own meshes); ``None`` = the scene's shared ones.
+    """
+
+    method: str
+    scene: str | Path
+    out: str | Path
+    sections: tuple[str, ...]
+    proxies: str | Path | None = None
+
+
+@dataclass(frozen=True)
+class MetricInputs:
+    """The files a scene's metrics read besides the scene itself (``None`` where no section needs one).
+
+    Attributes
+    ----------
+    proxies
+        Convex proxies ``.npz`` of the scene's objects (``physical``, ``mujoco``).
+    gt
+        Ground-truth ``scene.json`` (``recon``).
+    initial
+        Initial ``scene.json`` (``alignment``: pose change, and the objects' colours).
+    reference_dir
+        Folder with ``image.png``, ``segmentation.png`` and ``camera.json`` (``alignment``).
+    cache_dir
+        Content-addressed cache folder (hull files of the simulated sections).
+    """
+
+    proxies: str | Path | None = None
+    gt: str | Path | None = None
+    initial: str | Path | None = None
+    reference_dir: str | Path | None = None
+    cache_dir: str | Path | None = None
+
+
+def check_sections(sections: list[str] | tuple[str, ...]) -> list[str]:
+    """The requested sections in computing order; ``ValueError`` naming an unknown or missing one."""
+    unknown = sorted(set(sections) - set(SECTIONS))
+    if unknown:
+        raise ValueError(f"unknown metric sections {unknown}; known: {list(SECTIONS)}")
+    if not sections:
+        raise ValueError("no metric sections requested")
+    return [s for s in SECTIONS if s in sections]
+
+
+def required_inputs(sections: list[str] | tuple[str, ...]) -> list[str]:
+    """Names of the :class:`MetricInputs` fields that ``sections`` need."""
+    need = set()
+    for s in check_sections(sections):
+        need |= {"physical": {"proxies", "cache_dir"}, "mujoco": {"proxies"}, "alignment": {"initial", "reference_dir"},
+                 "recon": {"gt"}}[s]
+    return sorted(need)
+
+
+def scene_metrics(scene_path: str | Path, sections: list[str] | tuple[str, ...], inputs: MetricInputs,
+                  settings: dict) -> dict:
+    """Compute the requested metric sections of one scene.
+
+    Parameters
+    ----------
+    scene_path
+        The method's ``scene.json``.
+    sections
+        Any of :data:`SECTIONS`.
+    inputs
+        The other files the sections read (see :func:`required_inputs`).
+    settings
+        Per settings name (``physical``, ``sim``, ``mujoco``, ``alignment``, ``recon``) the mapping for
+        that parameter dataclass' ``from_dict``; a missing one takes the defaults.
+
+    Returns
+    -------
+    dict
+        The metrics file's content (``format``, ``sections`` and one dict per section).
+
+    Raises
+    ------
+    ValueError
+        An unknown section, or an input a section needs is missing.
+    phiscene.errors.PhisceneError
+        Bad scene data (the workflow records it as a failed scene).
+    """
+    from phiscene.proxies import read_proxies
+    from phiscene.scene import load_scene
+    from phiscene.sim.settings import SimSettings
+
+    order = check_sections(sections)
+    missing = [name for name in required_inputs(order) if getattr(inputs, name) is None]
+    if missing:
+        raise ValueError(f"metric sections {order} need {missing}")
+    scene = load_scene(scene_path)
+    out: dict = {"format": FORMAT, "sections": order}
+    proxies = read_proxies(inputs.proxies) if inputs.proxies is not None and {"physical", "mujoco"} & set(order) else None
+    sim = SimSettings.from_dict(settings.get("sim", {}))
+    if "physical" in order or "mujoco" in order:
+        from phiscene.metrics.physical import PhysicalParams
+
+        physical = PhysicalParams.from_dict(settings.get("physical", {}))
+    if "physical" in order:
+        from phiscene.metrics.physical import physical_metrics
+
+        r = out["physical"] = physical_metrics(scene, proxies, physical, sim, Path(inputs.cache_dir))
+        log.info("physical: pen %.4f m, float %.4f m, drift %.4f m / %.2f deg", r["pen_depth"], r["float_dist"],
+                 r["drift_trans"], r["drift_rot"])
+    if "mujoco" in order:
+        from phiscene.sim.mujoco import MujocoParams, drift_mujoco
+
+        r = out["mujoco"] = drift_mujoco(scene, proxies, physical, sim, MujocoParams.from_dict(settings.get("mujoco", {})))
+        log.info("mujoco: drift %.4f m / %.2f deg", r["drift_trans"], r["drift_rot"])
+    if "alignment" in order:
+        from phiscene.metrics.alignment import AlignmentParams, alignment_metrics
+
+        r = out["alignment"] = alignment_metrics(scene, load_scene(inputs.initial), Path(inputs.reference_dir),
+                                                 AlignmentParams.from_dict(settings.get("alignment", {})))
+        log.info("alignment: mask IoU %.3f, pose change %.4f m / %.2f deg", r["mask_iou"], r["pose_change_trans"],
+                 r["pose_change_rot"])
+    if "recon" in order:
+        from phiscene.metrics.reconstruction import ReconParams, reconstruction_metrics
+
+        r = out["recon"] = reconstruction_metrics(scene, load_scene(inputs.gt),
+                                                  ReconParams.from_dict(settings.get("recon", {})))
+        log.info("recon: scene CD %.4f, F %.3f, object CD %.4f, F %.3f, bbox IoU %.3f", r["scene_cd"],
+                 r["scene_fscore"], r["object_cd"], r["object_fscore"], r["bbox_iou"])
+    return out
+
+
+def read_section(data: dict, section: str, path: str | Path | None = None) -> dict:
+    """One section of a parsed metrics file; a failure record is returned as it is.
+
+    Parameters
+    ----------
+    data
+        The parsed JSON of a metrics file.
+    section
+        One of :data:`SECTIONS`.
+    path
+        The file, for the error message.
+
+    Raises
+    ------
+    InputError
+        Not a metrics file, or it lacks ``section`` (made for other tables: rerun its metrics job).
+    """
+    if is_failure_record(data):
+        return data
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        found = data.get("format") if isinstance(data, dict) else type(data).__name__
+        raise InputError(path, "format", f"not a metrics file (format {found!r}, expected {FORMAT!r})")
+    if not isinstance(data.get(section), dict):
+        raise InputError(path, section, f"no {section!r} section (this file has {data.get('sections')}); "
+                                        "its metrics job was made for other tables")
+    return data[section]
+
+
+def methods_metrics(tasks: list[MetricTask], inputs: MetricInputs, settings: dict, name: str = "metrics") -> dict:
+    """Compute and write the metrics file of every task (the methods of one scene), in one process.
+
+    A task whose scene data is bad (a :class:`~phiscene.errors.PhisceneError` that is ``per_scene``,
+    e.g. a failed upstream job's record or a corrupt mesh) gets a failure record in its file and the
+    others go on, as if each were its own job.
+
+    Parameters
+    ----------
+    tasks
+        The methods' files to make.
+    inputs
+        Files shared by the methods (a task's own ``proxies`` replaces the shared ones).
+    settings
+        As for :func:`scene_metrics`.
+    name
+        Job name, prefixed to each method's log lines and failure record.
+
+    Returns
+    -------
+    dict
+        Method -> ``True`` if its metrics were written, ``False`` if a failure record was.
+    """
+    import time
+
+    from phiscene.atomic import write_json
+    from phiscene.errors import PhisceneError
+    from phiscene.failures import record_for, write_failure
+
+    done = {}
+    for task in tasks:
+        t0 = time.perf_counter()
+        job = f"{name} {task.method}"
+        own = replace(inputs, proxies=task.proxies) if task.proxies is not None else inputs
+        try:
+            result = scene_metrics(task.scene, task.sections, own, settings)
+        except PhisceneError as exc:
+            if not exc.per_scene:
+                raise
+            write_failure([task.out], record_for(job, exc))
+            log.error("%s: FAILED (recorded in %s): %s", job, task.out, exc)
+            done[task.method] = False
+            continue
+        write_json(task.out, result)
+        log.info("%s: %s in %.2f s", job, "+".join(result["sections"]), time.perf_counter() - t0)
+        done[task.method] = True
+    return done
