@@ -164,7 +164,7 @@ def test_report_opens_in_chromium(tmp_path):
                        "crosssim": {"suite": "contact", "methods": ["initial", "phi_scene"]},
                        "recon": {"suite": "contact", "methods": ["initial", "phi_scene"]},
                        "ablation": {"suite": "contact", "methods": ["initial", "phi_scene"]}},
-            "export": {"report_demos": 0}}
+            "export": {"report_demos": 0}, "report": {"method": "phi_scene", "scaling": []}}
     (tmp_path / "tiny.yaml").write_text(yaml.safe_dump(tiny))
     base = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "--directory", str(tmp_path)]
     env = {**os.environ, "PYTHONHASHSEED": "0"}

@@ -6,6 +6,7 @@
 #   Figures         per-method bars per table, per-scene drift distributions (pybullet, MuJoCo)
 #   Scenes          per scene: before/after renders + support graph, an interactive offline 3D viewer
 #   Demo            the demo GIFs (results/demo/{suite}/{scene}.gif), when the workflow makes them
+#   Cost growth     time and peak memory per stage against scene size (benchmarks/scaling.py), if report.scaling
 # No benchmark: TSVs here: the runtime table (an input of the report) reads every TSV in results/benchmarks/.
 
 
@@ -178,3 +179,25 @@ rule report_demo:
         ENV
     script:
         "../scripts/report_demo.py"
+
+
+rule scaling_benchmark:
+    # Cost growth with scene size. It times every stage, so it claims every core and runs alone.
+    output:
+        csv="results/bench/scaling.csv",
+        png=report("results/bench/scaling.png", caption="../report/scaling.rst", category="Cost growth"),
+    params:
+        script=os.path.join(workflow.basedir, "benchmarks/scaling.py"),
+        sizes=config["report"]["scaling"],
+        settings={k: config[k] for k in ("benchmark", "sim", "proxies", "topology", "assembly", "metrics")},
+        version=V.REPORT,
+    log:
+        "results/logs/bench/scaling.log",
+    threads: workflow.resource_settings.cores or 1  # every local core (alone on the machine); 1 on a cluster
+    resources:
+        mem_mb=4000,
+        runtime=60,
+    conda:
+        ENV
+    script:
+        "../scripts/scaling_benchmark.py"

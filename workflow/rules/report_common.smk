@@ -38,6 +38,8 @@ def report_targets():
         out += expand("results/report/scenes/{suite}/{scene}.png", suite=suite, scene=scene_ids(suite))
         out += expand("results/report/viewers/{suite}/{scene}.html", suite=suite, scene=scene_ids(suite))
     out += [g.replace("results/demo/", "results/report/demo/").replace(".gif", ".html") for g in demo_gifs()]
+    if config["report"].get("scaling"):
+        out.append("results/bench/scaling.png")
     return out
 
 
