@@ -32,6 +32,7 @@ rebuilt, e.g. ``snakemake -R $(phiscene failures results)``.
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 from typing import Iterable
 
@@ -92,6 +93,13 @@ def write_failure(paths: Iterable[str | Path], record: dict) -> None:
     """Write ``record`` atomically to every path (a half-written record never exists)."""
     for p in paths:
         write_json(p, record)
+
+
+def record_failure(job: str, exc: PhisceneError, outputs: Iterable[str | Path], logger: logging.Logger) -> None:
+    """Write ``job``'s failure record (root cause from ``exc``) to every output and log it as one line."""
+    outputs = [str(p) for p in outputs]
+    write_failure(outputs, record_for(job, exc))
+    logger.error("%s: FAILED (recorded in %s): %s", job, ", ".join(outputs), exc)
 
 
 def read_failure(path: str | Path) -> dict | None:

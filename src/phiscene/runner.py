@@ -92,10 +92,8 @@ def job(name: str, log_file: str | Path | None = None, threads: int = 1,
             log.error("%s: %s", name, exc)
             logging.shutdown()
             raise SystemExit(1) from None
-        from phiscene.failures import record_for, write_failure
+        from phiscene.failures import record_failure
 
-        outputs = [str(p) for p in failure_outputs]
-        write_failure(outputs, record_for(name, exc))
-        log.error("%s: FAILED (recorded in %s): %s", name, ", ".join(outputs), exc)
+        record_failure(name, exc, failure_outputs, log)
         return
     log.info("%s: done in %.2f s", name, time.perf_counter() - t0)

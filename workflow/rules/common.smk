@@ -58,11 +58,16 @@ def method_scene(method, suite, scene):
     return f"results/methods/{method}/{suite}/{scene}/scene.json"
 
 
+def method_proxies(method, suite, scene):
+    """Proxies for the simulated metrics of a method's scene: its own if its scenes bring their own meshes."""
+    if config["methods"][method]["kind"] in OWN_MESH_KINDS:
+        return f"results/methods/{method}/{suite}/{scene}/proxies.npz"
+    return f"results/proxies/{suite}/{scene}.npz"
+
+
 def proxies_of(wildcards):
-    """Proxies for the simulated metrics of a method's scene."""
-    if config["methods"][wildcards.method]["kind"] in OWN_MESH_KINDS:
-        return f"results/methods/{wildcards.method}/{wildcards.suite}/{wildcards.scene}/proxies.npz"
-    return f"results/proxies/{wildcards.suite}/{wildcards.scene}.npz"
+    """method_proxies of a job's method, suite and scene."""
+    return method_proxies(wildcards.method, wildcards.suite, wildcards.scene)
 
 
 def alternation(names):
@@ -70,9 +75,11 @@ def alternation(names):
     return "|".join(names) if names else "(?!x)x"
 
 
-#: Metric sections (phiscene.metrics.evaluate.SECTIONS) each table reads from a scene's metrics files.
-TABLE_SECTIONS = {"phys": ["physical"], "crosssim": ["physical", "mujoco"], "ablation": ["physical", "alignment"],
-                  "recon": ["recon"]}
+def tables_showing(method, suite):
+    """The tables with metrics files (phiscene.metrics.evaluate.TABLE_SECTIONS) that show a method on a suite."""
+    from phiscene.metrics.evaluate import TABLE_SECTIONS
+
+    return [t for t in TABLE_SECTIONS if config["tables"][t]["suite"] == suite and method in config["tables"][t]["methods"]]
 
 
 def metric_groups(suite):
@@ -83,7 +90,7 @@ def metric_groups(suite):
     """
     groups = {}
     for m in config["methods"]:
-        tables = [t for t in TABLE_SECTIONS if config["tables"][t]["suite"] == suite and m in config["tables"][t]["methods"]]
+        tables = tables_showing(m, suite)
         if tables:
             groups.setdefault("_".join(tables), []).append(m)
     return groups
@@ -91,9 +98,9 @@ def metric_groups(suite):
 
 def metric_sections(method, suite):
     """Sections of a method's metrics files on a suite: those of every table that shows the method there."""
-    sections = {s for t, needs in TABLE_SECTIONS.items() for s in needs
-                if config["tables"][t]["suite"] == suite and method in config["tables"][t]["methods"]}
-    return [s for s in ("physical", "mujoco", "alignment", "recon") if s in sections]
+    from phiscene.metrics.evaluate import TABLE_SECTIONS, check_sections
+
+    return check_sections({s for t in tables_showing(method, suite) for s in TABLE_SECTIONS[t]})
 
 
 def metric_tasks(suite, methods):
@@ -121,7 +128,7 @@ def metrics_inputs(suite, methods, scene):
         inputs[f"scene_{m}"] = method_scene(m, suite, scene)
         wanted = set(required_inputs(t["sections"]))
         if "proxies" in wanted and t["own_proxies"]:
-            inputs[f"proxies_{m}"] = f"results/methods/{m}/{suite}/{scene}/proxies.npz"
+            inputs[f"proxies_{m}"] = method_proxies(m, suite, scene)
             wanted.discard("proxies")
         need |= wanted
     if "proxies" in need:
@@ -136,11 +143,11 @@ def metrics_inputs(suite, methods, scene):
     return inputs
 
 
-def table_inputs(table, names=None):
-    """Per method: the metrics files of every scene of the table's suite."""
+def table_inputs(table):
+    """Per method of a table: the metrics files of every scene of the table's suite."""
     suite = config["tables"][table]["suite"]
-    names = config["tables"][table]["methods"] if names is None else names
-    return {name: expand(f"results/metrics/{name}/{suite}/{{scene}}.json", scene=scene_ids(suite)) for name in names}
+    return {m: expand(f"results/metrics/{m}/{suite}/{{scene}}.json", scene=scene_ids(suite))
+            for m in config["tables"][table]["methods"]}
 
 
 def topology_table_inputs(wildcards):

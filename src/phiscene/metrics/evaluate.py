@@ -41,6 +41,12 @@ SECTIONS = ("physical", "mujoco", "alignment", "recon")
 #: Settings each section reads (keys of the ``settings`` mapping of :func:`scene_metrics`).
 SECTION_SETTINGS = {"physical": ("physical", "sim"), "mujoco": ("physical", "sim", "mujoco"),
                     "alignment": ("alignment",), "recon": ("recon",)}
+#: Input files each section reads (fields of :class:`MetricInputs`).
+SECTION_INPUTS = {"physical": ("proxies", "cache_dir"), "mujoco": ("proxies",), "alignment": ("initial", "reference_dir"),
+                  "recon": ("gt",)}
+#: Sections each paper table (:mod:`phiscene.tables`) reads from the metrics files of the methods it shows.
+TABLE_SECTIONS = {"phys": ("physical",), "crosssim": ("physical", "mujoco"), "ablation": ("physical", "alignment"),
+                  "recon": ("recon",)}
 
 
 @dataclass(frozen=True)
@@ -93,7 +99,7 @@ class MetricInputs:
     cache_dir: str | Path | None = None
 
 
-def check_sections(sections: list[str] | tuple[str, ...]) -> list[str]:
+def check_sections(sections: list[str] | tuple[str, ...] | set[str]) -> list[str]:
     """The requested sections in computing order; ``ValueError`` naming an unknown or missing one."""
     unknown = sorted(set(sections) - set(SECTIONS))
     if unknown:
@@ -105,11 +111,7 @@ def check_sections(sections: list[str] | tuple[str, ...]) -> list[str]:
 
 def required_inputs(sections: list[str] | tuple[str, ...]) -> list[str]:
     """Names of the :class:`MetricInputs` fields that ``sections`` need."""
-    need = set()
-    for s in check_sections(sections):
-        need |= {"physical": {"proxies", "cache_dir"}, "mujoco": {"proxies"}, "alignment": {"initial", "reference_dir"},
-                 "recon": {"gt"}}[s]
-    return sorted(need)
+    return sorted({name for s in check_sections(sections) for name in SECTION_INPUTS[s]})
 
 
 def scene_metrics(scene_path: str | Path, sections: list[str] | tuple[str, ...], inputs: MetricInputs,
@@ -150,7 +152,7 @@ def scene_metrics(scene_path: str | Path, sections: list[str] | tuple[str, ...],
         raise ValueError(f"metric sections {order} need {missing}")
     scene = load_scene(scene_path)
     out: dict = {"format": FORMAT, "sections": order}
-    proxies = read_proxies(inputs.proxies) if inputs.proxies is not None and {"physical", "mujoco"} & set(order) else None
+    proxies = read_proxies(inputs.proxies) if "proxies" in required_inputs(order) else None
     sim = SimSettings.from_dict(settings.get("sim", {}))
     if "physical" in order or "mujoco" in order:
         from phiscene.metrics.physical import PhysicalParams
@@ -239,7 +241,7 @@ def methods_metrics(tasks: list[MetricTask], inputs: MetricInputs, settings: dic
 
     from phiscene.atomic import write_json
     from phiscene.errors import PhisceneError
-    from phiscene.failures import record_for, write_failure
+    from phiscene.failures import record_failure
 
     done = {}
     for task in tasks:
@@ -251,8 +253,7 @@ def methods_metrics(tasks: list[MetricTask], inputs: MetricInputs, settings: dic
         except PhisceneError as exc:
             if not exc.per_scene:
                 raise
-            write_failure([task.out], record_for(job, exc))
-            log.error("%s: FAILED (recorded in %s): %s", job, task.out, exc)
+            record_failure(job, exc, [task.out], log)
             done[task.method] = False
             continue
         write_json(task.out, result)
