@@ -89,3 +89,27 @@ def test_not_json(tmp_path):
     p.write_text("{not json")
     with pytest.raises(InputError, match=r"scene.json: not valid JSON \(line 1"):
         load_scene(p)
+
+
+def test_structure_and_attached_round_trip(scene_file, tmp_path):
+    wall = {"id": "wall_0", "kind": "wall", "normal": [0.0, -1.0, 0.0], "offset": 2.0}
+    path = edit(scene_file, lambda d: (d.update(structure=[wall]), d["objects"][0].update(attached="wall_0")))
+    s = load_scene(path)
+    assert s.attached_ids == ["a"] and s.free_ids == ["b"]
+    plane = s.structure[0]
+    # the plane y = 2 with the room at y < 2: a point at y = 1 is 1 m inside the room
+    assert plane.signed_distance(np.array([[0.0, 1.0, 0.0]]))[0] == pytest.approx(1.0)
+    s2 = load_scene(save_scene(s, tmp_path / "again" / "scene.json"))
+    assert s2.structure == s.structure and s2.objects[0].attached == "wall_0"
+
+
+@pytest.mark.parametrize("change, field", [
+    (lambda d: d["objects"][0].update(attached="wall_9"), "objects[0].attached"),
+    (lambda d: d.update(structure=[{"id": "w", "kind": "wall", "normal": [0, 0, 2], "offset": 0}]),
+     "structure[0].normal"),
+    (lambda d: d.update(structure=[{"id": "a", "kind": "wall", "normal": [0, 0, 1], "offset": 0}]),
+     "structure[0].id"),
+])
+def test_structure_errors_name_the_field(scene_file, change, field):
+    with pytest.raises(InputError, match=field.replace("[", r"\[").replace("]", r"\]")):
+        load_scene(edit(scene_file, change))

@@ -43,6 +43,10 @@ class SceneObject:
         RGB colour of the object in the instance segmentation, or ``None``.
     meta
         Free-form extra data carried through unchanged.
+    attached
+        ``None`` for a free rigid body; otherwise the id of what holds it in place (a :class:`Plane` of
+        :attr:`Scene.structure`, e.g. ``wall_0``, or ``ground``): the object is static, kept where it is (never
+        dropped or settled), a collider for the others, and left out of drift averages.
     """
 
     id: str
@@ -51,6 +55,7 @@ class SceneObject:
     description: str = ""
     color: tuple[int, int, int] | None = None
     meta: dict = field(default_factory=dict)
+    attached: str | None = None
 
     def mesh(self):
         """The local-frame mesh, loaded once per path (see :func:`phiscene.meshes.load_mesh`)."""
@@ -69,6 +74,41 @@ class SceneObject:
         return transform_points(self.pose, points_local)
 
 
+#: Kinds of :class:`Plane`.
+PLANE_KINDS = ("wall", "ceiling")
+
+
+@dataclass(frozen=True)
+class Plane:
+    """A static structural plane of the scene (a wall or the ceiling), a supporter like the ground.
+
+    Attributes
+    ----------
+    id
+        Unique name among objects and planes (``wall_0``, ``ceiling``).
+    kind
+        ``wall`` or ``ceiling``.
+    normal : (3,) float
+        Unit normal pointing into the room (away from the solid side).
+    offset
+        Plane offset ``d``: points ``p`` on the plane satisfy ``normal . p + d = 0``; the room is where it is > 0.
+    """
+
+    id: str
+    kind: str
+    normal: tuple[float, float, float]
+    offset: float
+
+    def signed_distance(self, points: np.ndarray) -> np.ndarray:
+        """Signed distances (n,) of points (n, 3) from the plane, positive on the room side."""
+        return np.asarray(points, dtype=float) @ np.asarray(self.normal, dtype=float) + self.offset
+
+    def to_dict(self) -> dict:
+        """JSON form (``structure`` entry of ``scene.json``)."""
+        return {"id": self.id, "kind": self.kind, "normal": [float(v) for v in self.normal],
+                "offset": float(self.offset)}
+
+
 @dataclass
 class Scene:
     """A set of objects above a ground plane.
@@ -85,6 +125,8 @@ class Scene:
         Free-form extra data carried through unchanged.
     source
         The file the scene was loaded from (``None`` for a scene built in memory).
+    structure
+        Static walls and ceiling (:class:`Plane`), supporters besides the ground; empty for most scenes.
     """
 
     objects: list[SceneObject]
@@ -92,10 +134,21 @@ class Scene:
     camera: Path | None = None
     meta: dict = field(default_factory=dict)
     source: Path | None = None
+    structure: list[Plane] = field(default_factory=list)
 
     @property
     def ids(self) -> list[str]:
         return [o.id for o in self.objects]
+
+    @property
+    def attached_ids(self) -> list[str]:
+        """Ids of the objects fixed in place (:attr:`SceneObject.attached` set), in scene order."""
+        return [o.id for o in self.objects if o.attached is not None]
+
+    @property
+    def free_ids(self) -> list[str]:
+        """Ids of the free rigid bodies (not attached), in scene order."""
+        return [o.id for o in self.objects if o.attached is None]
 
     def __len__(self) -> int:
         return len(self.objects)
@@ -132,11 +185,15 @@ def scene_to_dict(scene: Scene, json_dir: Path) -> dict:
             d["color"] = [int(c) for c in o.color]
         if o.meta:
             d["meta"] = o.meta
+        if o.attached is not None:
+            d["attached"] = o.attached
         objs.append(d)
     out = {"format": FORMAT, "units": "m", "up": [0, 0, 1], "ground": {"height": float(scene.ground_height)},
            "objects": objs}
     if scene.camera is not None:
         out["camera"] = _rel(scene.camera, json_dir)
+    if scene.structure:
+        out["structure"] = [p.to_dict() for p in scene.structure]
     if scene.meta:
         out["meta"] = scene.meta
     return out
@@ -204,10 +261,17 @@ def load_scene(path: str | Path, check_meshes: bool = True) -> Scene:
             raise InputError(path, f"{where}.mesh", f"mesh file not found: {d['mesh']}")
         color = tuple(d["color"]) if "color" in d else None
         objects.append(SceneObject(id=d["id"], mesh_path=mesh_path, pose=pose, description=d.get("description", ""),
-                                   color=color, meta=d.get("meta", {})))
+                                   color=color, meta=d.get("meta", {}), attached=d.get("attached")))
+    structure = _load_structure(path, data.get("structure", []), seen)
+    holders = {"ground"} | {p.id for p in structure}
+    for i, o in enumerate(objects):
+        if o.attached is not None and o.attached not in holders:
+            raise InputError(path, f"objects[{i}].attached", f"{o.attached!r} is neither 'ground' nor a structure "
+                             f"plane (planes: {sorted(p.id for p in structure)})")
     camera = data.get("camera")
     scene = Scene(objects=objects, ground_height=ground,
-                  camera=(root / camera).resolve() if camera else None, meta=data.get("meta", {}), source=path)
+                  camera=(root / camera).resolve() if camera else None, meta=data.get("meta", {}), source=path,
+                  structure=structure)
     if check_meshes:
         from phiscene.meshes import load_mesh
 
@@ -218,6 +282,24 @@ def load_scene(path: str | Path, check_meshes: bool = True) -> Scene:
                 raise InputError(path, f"objects[{i}].mesh", exc.problem) from None
             _check_placement(path, i, o, mesh.bounds, ground)
     return scene
+
+
+def _load_structure(path: Path, entries: list[dict], object_ids: set[str]) -> list[Plane]:
+    """Planes of the ``structure`` list: unit normals, finite offsets, ids unique among planes and objects."""
+    planes, seen = [], set()
+    for i, d in enumerate(entries):
+        where = f"structure[{i}]"
+        if d["id"] in object_ids or d["id"] in seen:
+            raise InputError(path, f"{where}.id", f"id {d['id']!r} is already used by an object or a plane")
+        seen.add(d["id"])
+        n = np.asarray(d["normal"], dtype=float)
+        length = float(np.linalg.norm(n)) if np.all(np.isfinite(n)) else float("nan")
+        if not np.isfinite(length) or abs(length - 1.0) > 1e-6:
+            raise InputError(path, f"{where}.normal", f"must be a finite unit vector, got {n.tolist()}")
+        if not np.isfinite(d["offset"]):
+            raise InputError(path, f"{where}.offset", f"must be finite, got {d['offset']}")
+        planes.append(Plane(id=d["id"], kind=d["kind"], normal=tuple(float(v) for v in n), offset=float(d["offset"])))
+    return planes
 
 
 def _check_placement(path: Path, index: int, obj: SceneObject, local_bounds: np.ndarray, ground: float) -> None:
