@@ -1,5 +1,6 @@
 # Shared helpers: scene lists, method lookup, paths. Everything a job uses reaches it through params.
 
+import phiscene.config
 import phiscene.versions as V
 
 RESULTS = "results"
@@ -20,8 +21,34 @@ def scene_ids(suite):
 
 
 def scene_index(wildcards):
+    """Position of a job's scene in its suite (the benchmark generator's scene number)."""
     ids = scene_ids(wildcards.suite)
     return ids.index(wildcards.scene)
+
+
+def benchmark_suites():
+    """Suites the embedded benchmark generates (those without a real-data `source`)."""
+    return [s for s in config["suites"] if "source" not in config["suites"][s]]
+
+
+def source_suites():
+    """Suites read from a real-data `source` (3D-FRONT)."""
+    return [s for s in config["suites"] if "source" in config["suites"][s]]
+
+
+def benchmark_settings(wildcards):
+    """`benchmark` with the suite's override deep-merged over it, plus `sim` and `proxies` (phiscene.config)."""
+    return phiscene.config.bench_settings(config, wildcards.suite)
+
+
+def suite_source(wildcards):
+    """The real-data `source` mapping of a job's suite."""
+    return config["suites"][wildcards.suite]["source"]
+
+
+def topology_settings(wildcards):
+    """`topology.<backend>` of a job's backend (defaults when absent)."""
+    return config["topology"].get(wildcards.backend, {})
 
 
 def methods_of_kind(kind):
@@ -68,6 +95,27 @@ def method_proxies(method, suite, scene):
 def proxies_of(wildcards):
     """method_proxies of a job's method, suite and scene."""
     return method_proxies(wildcards.method, wildcards.suite, wildcards.scene)
+
+
+def scene_of(wildcards):
+    """method_scene of a job's method, suite and scene."""
+    return method_scene(wildcards.method, wildcards.suite, wildcards.scene)
+
+
+def method_topology(wildcards):
+    """The support graph a job's method places by: its `topology` backend's graph of the scene."""
+    backend = config["methods"][wildcards.method]["topology"]
+    return f"results/topology/{backend}/{wildcards.suite}/{wildcards.scene}.json"
+
+
+def method_assembly(wildcards):
+    """Assembly settings of a job's phi_scene-kind method: its `assembly` override deep-merged over `assembly`."""
+    return phiscene.config.method_assembly(config, wildcards.method)
+
+
+def baseline_settings(wildcards):
+    """`methods.<method>.params` of a job's baseline method (defaults when absent)."""
+    return config["methods"][wildcards.method].get("params", {})
 
 
 def alternation(names):

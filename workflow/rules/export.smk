@@ -9,7 +9,7 @@ include: "export_common.smk"
 
 rule export_scene:
     input:
-        scene=lambda wc: method_scene(wc.method, wc.suite, wc.scene),
+        scene=scene_of,
         proxies=proxies_of,
         topology=export_topology,
     output:
