@@ -9,9 +9,17 @@ from scipy.spatial.transform import Rotation
 
 from phiscene.atomic import atomic_path, write_json
 from phiscene.metrics.evaluate import FORMAT as METRICS_FORMAT
-from phiscene.tables import average_rank, physical_table, to_markdown, PHYS_COLUMNS
-from phiscene.transforms import (decompose, invert, make_pose, matrix_to_quat_wxyz, quat_wxyz_to_matrix,
-                                 rigidity_error, rotation_angle, transform_points)
+from phiscene.tables import PHYS_COLUMNS, average_rank, physical_table, to_markdown
+from phiscene.transforms import (
+    decompose,
+    invert,
+    make_pose,
+    matrix_to_quat_wxyz,
+    quat_wxyz_to_matrix,
+    rigidity_error,
+    rotation_angle,
+    transform_points,
+)
 
 
 def test_pose_compose_invert():
