@@ -127,7 +127,9 @@ def tables_showing(method, suite):
     """The tables with metrics files (phiscene.metrics.evaluate.TABLE_SECTIONS) that show a method on a suite."""
     from phiscene.metrics.evaluate import TABLE_SECTIONS
 
-    return [t for t in TABLE_SECTIONS if config["tables"][t]["suite"] == suite and method in config["tables"][t]["methods"]]
+    return [
+        t for t in TABLE_SECTIONS if config["tables"][t]["suite"] == suite and method in config["tables"][t]["methods"]
+    ]
 
 
 def metric_groups(suite):
@@ -153,8 +155,14 @@ def metric_sections(method, suite):
 
 def metric_tasks(suite, methods):
     """Per method: its sections, and whether it brings its own proxies (params of a metrics job)."""
-    return [{"method": m, "sections": metric_sections(m, suite),
-             "own_proxies": config["methods"][m]["kind"] in OWN_MESH_KINDS} for m in methods]
+    return [
+        {
+            "method": m,
+            "sections": metric_sections(m, suite),
+            "own_proxies": config["methods"][m]["kind"] in OWN_MESH_KINDS,
+        }
+        for m in methods
+    ]
 
 
 def metric_settings(suite, methods):
@@ -186,24 +194,31 @@ def metrics_inputs(suite, methods, scene):
     if "initial" in need:
         inputs["initial"] = f"{base}/initial/scene.json"
     if "reference_dir" in need:
-        inputs.update(image=f"{base}/reference/image.png", segmentation=f"{base}/reference/segmentation.png",
-                      camera=f"{base}/reference/camera.json")
+        inputs.update(
+            image=f"{base}/reference/image.png",
+            segmentation=f"{base}/reference/segmentation.png",
+            camera=f"{base}/reference/camera.json",
+        )
     return inputs
 
 
 def table_inputs(table):
     """Per method of a table: the metrics files of every scene of the table's suite."""
     suite = config["tables"][table]["suite"]
-    return {m: expand(f"results/metrics/{m}/{suite}/{{scene}}.json", scene=scene_ids(suite))
-            for m in config["tables"][table]["methods"]}
+    return {
+        m: expand(f"results/metrics/{m}/{suite}/{{scene}}.json", scene=scene_ids(suite))
+        for m in config["tables"][table]["methods"]
+    }
 
 
 def topology_table_inputs(wildcards):
     """Per backend the predicted support graphs of the topology table's suite, and the ground-truth graphs."""
     suite = config["tables"]["topology"]["suite"]
     scenes = scene_ids(suite)
-    inputs = {b: expand(f"results/topology/{b}/{suite}/{{scene}}.json", scene=scenes)
-              for b in config["tables"]["topology"]["backends"]}
+    inputs = {
+        b: expand(f"results/topology/{b}/{suite}/{{scene}}.json", scene=scenes)
+        for b in config["tables"]["topology"]["backends"]
+    }
     inputs["gt_topology"] = expand(f"results/scenes/{suite}/{{scene}}/gt/topology.json", scene=scenes)
     return inputs
 
