@@ -1,4 +1,4 @@
-"""The scene data model and its ``scene.json`` file format (DESIGN §3).
+"""The scene data model and its ``scene.json`` file format (docs/DESIGN.md §3).
 
 A :class:`Scene` is a list of :class:`SceneObject` (mesh in its local frame +
 pose into the world) above a horizontal ground plane; z is up, units are
