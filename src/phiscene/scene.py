@@ -118,6 +118,22 @@ class Scene:
         return out
 
 
+def ground_below(scene: Scene) -> float:
+    """Height of a ground right below the scene: the lowest world z of all object meshes (m).
+
+    The drift tests of every simulator release the scene on this ground (not ``scene.ground_height``),
+    so a scene floating above, or sunk into, its own ground plane is measured from where it rests.
+
+    Raises
+    ------
+    InputError
+        The scene has no objects.
+    """
+    if not scene.objects:
+        raise InputError(scene.source, "objects", "scene has no objects")
+    return float(min(transform_points(o.pose, o.mesh().vertices)[:, 2].min() for o in scene.objects))
+
+
 def _rel(target: Path, start: Path) -> str:
     return Path(os.path.relpath(Path(target).resolve(), Path(start).resolve())).as_posix()
 
