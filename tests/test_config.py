@@ -1,6 +1,7 @@
 """The workflow configuration: deep-merged overrides, one-line key checks while the DAG is built, schema in sync."""
 
 import copy
+import json
 import os
 import subprocess
 import sys
@@ -90,6 +91,29 @@ def test_method_override_of_one_nested_key_keeps_the_other_keys_of_config_yaml(s
                 if shift:
                     assert getattr(getattr(defaults, name), key) != value, (name, key)
     assert p.penetration == base["penetration"] and p.settle == base["settle"]
+
+
+@pytest.mark.workflow
+def test_grounding_job_receives_the_deep_merged_override(tmp_path):
+    """End to end: one tiny scene grounded by a method overriding one nested key; its assembly log's params."""
+    overrides = {"suites": {"contact": {"n_scenes": 1}}, "proxies": {"backend": "convex"},
+                 "benchmark": {"n_objects": [2, 2], "render": {"width": 64, "height": 48}},
+                 "assembly": {"penetration_params": {"n_active": 256, "n_context": 256}},
+                 "methods": {"tight": {"kind": "phi_scene", "topology": "height",
+                                       "assembly": {"penetration_params": {"eps": 0.004}}}}}
+    cfg = tmp_path / "override.yaml"
+    cfg.write_text(yaml.safe_dump(overrides))
+    target = "results/methods/tight/contact/scene_000/assembly.json"
+    cmd = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "--directory", str(tmp_path / "run"),
+           "-j2", "--configfile", str(cfg), "--", target]
+    res = subprocess.run(cmd, cwd=ROOT, env={**os.environ, "PYTHONHASHSEED": "0"}, capture_output=True, text=True,
+                         timeout=600)
+    assert res.returncode == 0, res.stderr[-3000:]
+    got = json.loads((tmp_path / "run" / target).read_text())["params"]
+    want_pen = {**CONFIG["assembly"]["penetration_params"], "n_active": 256, "n_context": 256, "eps": 0.004}
+    assert {k: got["penetration_params"][k] for k in want_pen} == want_pen
+    assert {k: got["settle_params"][k] for k in CONFIG["assembly"]["settle_params"]} == \
+        CONFIG["assembly"]["settle_params"]
 
 
 # ---------------------------------------------------------------------------------------------------- checks
