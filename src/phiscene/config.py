@@ -32,7 +32,7 @@ check keys and their own value rules.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import fields, is_dataclass
+from dataclasses import fields
 from importlib import import_module
 from pathlib import Path
 from typing import Any
@@ -257,9 +257,3 @@ def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -
         elif kind in BASELINE_PARAMS:
             check_params(load_class(BASELINE_PARAMS[kind]), spec.get("params"), f"methods.{name}.params")
 
-
-def params_fields(cls: type) -> list[str]:
-    """Field names of a parameter dataclass (what its schema section must list)."""
-    if not is_dataclass(cls):
-        raise TypeError(f"{cls!r} is not a dataclass")
-    return [f.name for f in fields(cls)]
