@@ -250,10 +250,8 @@ def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -
         spec = _mapping(spec, f"methods.{name}")
         kind = spec.get("kind")
         if kind == "phi_scene":
-            _mapping(spec.get("assembly"), f"methods.{name}.assembly")
-            from phiscene.assembly.assemble import AssemblyParams
-
-            check_params(AssemblyParams, method_assembly(config, name), f"methods.{name}.assembly")
+            _mapping(spec.get("assembly"), f"methods.{name}.assembly")  # a non-mapping override: one line too
+            check_params(load_class(SECTIONS["assembly"]), method_assembly(config, name), f"methods.{name}.assembly")
         elif kind in BASELINE_PARAMS:
             check_params(load_class(BASELINE_PARAMS[kind]), spec.get("params"), f"methods.{name}.params")
 
