@@ -1,5 +1,5 @@
-# phiscene: `make run` builds the default benchmark tables, `make test` runs the test suite.
-# Both create the virtual environment (.venv) first if it is absent.
+# phiscene: `make run` builds the default benchmark tables, `make test` runs the test suite, `make lint` the linters.
+# Each creates the virtual environment (.venv) first if it is absent.
 
 PYTHON ?= python3
 VENV ?= .venv
@@ -19,7 +19,13 @@ all: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
+# ruff and snakefmt read their settings from pyproject.toml ([tool.ruff], [tool.snakefmt]).
+LINT_PY := src tests workflow/scripts benchmarks tools
+LINT_SMK := Snakefile workflow/rules
+
 lint: $(STAMP)
+	$(BIN)/ruff check $(LINT_PY)
+	$(BIN)/snakefmt --check $(LINT_SMK)
 	$(BIN)/snakemake --lint
 
 bench: $(STAMP)

@@ -4,7 +4,10 @@
 import glob
 import os
 
+from snakemake.exceptions import WorkflowError
 from snakemake.utils import min_version, validate
+
+from phiscene.config import ConfigError, check_config, schema_sections
 
 min_version("9.0")
 
@@ -12,6 +15,14 @@ min_version("9.0")
 configfile: os.path.join(workflow.basedir, "config/config.yaml")
 
 
+# Every parameter class on its section first (phiscene.config): a misspelled key fails here in one line naming
+# its config path, before any job runs; then the schema checks types and ranges. Jobs that re-read this file
+# (cluster executors) skip the class check: the main process has made it (it imports the stages, ~0.7 s).
+if workflow.is_main_process:
+    try:
+        check_config(config, schema_sections(os.path.join(workflow.basedir, "config/schema.yaml")))
+    except ConfigError as exc:
+        raise WorkflowError(str(exc)) from None
 validate(config, "config/schema.yaml")
 
 

@@ -9,9 +9,19 @@ from scipy.spatial.transform import Rotation
 
 from phiscene.atomic import atomic_path, write_json
 from phiscene.metrics.evaluate import FORMAT as METRICS_FORMAT
-from phiscene.tables import average_rank, physical_table, to_markdown, PHYS_COLUMNS
-from phiscene.transforms import (decompose, invert, make_pose, matrix_to_quat_wxyz, quat_wxyz_to_matrix,
-                                 rigidity_error, rotation_angle, transform_points)
+from phiscene.tables import PHYS_COLUMNS, average_rank, physical_table, to_markdown
+from phiscene.transforms import (
+    Y_UP_TO_Z_UP,
+    Z_UP_TO_Y_UP,
+    decompose,
+    invert,
+    make_pose,
+    matrix_to_quat_wxyz,
+    quat_wxyz_to_matrix,
+    rigidity_error,
+    rotation_angle,
+    transform_points,
+)
 
 
 def test_pose_compose_invert():
@@ -24,6 +34,16 @@ def test_pose_compose_invert():
     p = np.array([[0.1, 0.2, 0.3]])
     np.testing.assert_allclose(transform_points(T, p), 1.5 * p @ R.T + [1, 2, 3])
     assert rigidity_error(T) is None
+
+
+def test_up_axis_conversion_is_minus_90_degrees_about_x():
+    want = Rotation.from_euler("x", -90, degrees=True).as_matrix()
+    np.testing.assert_allclose(Z_UP_TO_Y_UP[:3, :3], want, atol=1e-15)
+    assert (Z_UP_TO_Y_UP[:3, 3] == 0).all() and (Y_UP_TO_Z_UP @ Z_UP_TO_Y_UP == np.eye(4)).all()
+    # glTF: +Y up, +Z towards the viewer (phiscene's -Y front); phiscene: +Z up
+    np.testing.assert_array_equal(transform_points(Z_UP_TO_Y_UP, [[0, 0, 1], [0, -1, 0]]), [[0, 1, 0], [0, 0, 1]])
+    with pytest.raises(ValueError):
+        Z_UP_TO_Y_UP[0, 0] = 2.0  # one shared constant: read-only
 
 
 def test_quaternion_convention_wxyz():

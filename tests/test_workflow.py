@@ -23,6 +23,15 @@ def test_lint_clean():
     assert "Congratulations" in res.stdout + res.stderr or "lint" not in (res.stdout + res.stderr).lower(), res.stdout
 
 
+@pytest.mark.parametrize("tool", ["ruff", "snakefmt"])
+def test_lint_python_and_rules_formatted(tool):
+    """`make lint`'s other two linters (settings in pyproject.toml): ruff on the sources, snakefmt on the rules."""
+    args = ["check", "src", "tests", "workflow/scripts", "benchmarks", "tools"] if tool == "ruff" else \
+        ["--check", "Snakefile", "workflow/rules"]
+    res = subprocess.run([sys.executable, "-m", tool, *args], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stdout[-4000:] + res.stderr[-4000:]
+
+
 @pytest.mark.workflow
 def test_two_scene_run(tmp_path):
     target = ["results/tables/phys.csv", "results/tables/topology.csv"]

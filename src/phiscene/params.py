@@ -86,7 +86,7 @@ class Params:
         for name, convert in cls._coerce.items():
             if name in d:
                 d[name] = convert(d[name])
-        for name, sub in _nested_params(cls).items():
+        for name, sub in nested_params(cls).items():
             value = d.get(name)
             if name in d and not isinstance(value, sub):
                 if value is not None and not isinstance(value, Mapping):
@@ -111,7 +111,7 @@ class Params:
         return asdict(self)
 
 
-def _nested_params(cls: type) -> dict[str, type[Params]]:
+def nested_params(cls: type) -> dict[str, type[Params]]:
     """Fields of dataclass ``cls`` whose declared type is a :class:`Params` subclass.
 
     Annotations are strings under ``from __future__ import annotations``; a bare class name is

@@ -272,6 +272,29 @@ def read_proxies(path: str | Path) -> dict[str, Proxy]:
     return out
 
 
+def check_proxies(scene, proxies: dict[str, Proxy], ids: list[str] | None = None) -> None:
+    """Check that every object of a scene has a non-empty convex proxy.
+
+    Parameters
+    ----------
+    scene
+        A :class:`~phiscene.scene.Scene` (its ``source`` names the file in the error).
+    proxies
+        Proxies by object id.
+    ids
+        Only these object ids (default: every object of ``scene``).
+
+    Raises
+    ------
+    InputError
+        Field ``proxies``, naming the objects without a proxy (or with no hulls).
+    """
+    ids = [o.id for o in scene.objects] if ids is None else list(ids)
+    missing = [i for i in ids if i not in proxies or not proxies[i].hulls]
+    if missing:
+        raise InputError(scene.source, "proxies", f"no collision proxies for objects {missing}")
+
+
 def scene_proxies(scene, params: ProxyParams, cache_dir: str | Path) -> dict[str, Proxy]:
     """Proxies of every object of a :class:`~phiscene.scene.Scene`, keyed by object id."""
     return {o.id: proxy_for_mesh(o.mesh_path, params, cache_dir) for o in scene.objects}

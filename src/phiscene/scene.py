@@ -1,4 +1,4 @@
-"""The scene data model and its ``scene.json`` file format (DESIGN §3).
+"""The scene data model and its ``scene.json`` file format (docs/DESIGN.md §3).
 
 A :class:`Scene` is a list of :class:`SceneObject` (mesh in its local frame +
 pose into the world) above a horizontal ground plane; z is up, units are
@@ -169,6 +169,22 @@ class Scene:
         if meta is not None:
             out.meta = {**out.meta, **meta}
         return out
+
+
+def ground_below(scene: Scene) -> float:
+    """Height of a ground right below the scene: the lowest world z of all object meshes (m).
+
+    The drift tests of every simulator release the scene on this ground (not ``scene.ground_height``),
+    so a scene floating above, or sunk into, its own ground plane is measured from where it rests.
+
+    Raises
+    ------
+    InputError
+        The scene has no objects.
+    """
+    if not scene.objects:
+        raise InputError(scene.source, "objects", "scene has no objects")
+    return float(min(transform_points(o.pose, o.mesh().vertices)[:, 2].min() for o in scene.objects))
 
 
 def _rel(target: Path, start: Path) -> str:

@@ -14,6 +14,15 @@ from scipy.spatial.transform import Rotation
 
 from phiscene.tolerances import TOL
 
+#: Pose (4, 4) taking phiscene's z-up world to the y-up world of glTF, three.js, 3D-FRONT and SAM 3D Objects'
+#: GLB files: -90 degrees about x, (x, y, z) -> (x, z, -y). The one home of this convention (export, viewer,
+#: importers); read-only.
+Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+Z_UP_TO_Y_UP.setflags(write=False)
+#: Its inverse, y-up to z-up: (x, y, z) -> (x, -z, y); read-only.
+Y_UP_TO_Z_UP = np.ascontiguousarray(Z_UP_TO_Y_UP.T)
+Y_UP_TO_Z_UP.setflags(write=False)
+
 
 def make_pose(rotation: np.ndarray | None = None, translation=(0.0, 0.0, 0.0), scale: float = 1.0) -> np.ndarray:
     """Compose a pose from a rotation, a translation and a uniform scale.

@@ -12,7 +12,7 @@ fetched from a CDN. :func:`scene_viewer_html` checks the page it writes has no
 page that needs the network.
 
 Conventions: glTF and three.js are y-up, phiscene is z-up, so the exported
-scene is rotated by :data:`Z_UP_TO_Y_UP` (x, y, z) -> (x, z, -y); the page's
+scene is rotated by :data:`phiscene.transforms.Z_UP_TO_Y_UP` (x, y, z) -> (x, z, -y); the page's
 trackball then orbits about the scene's vertical. The page opens at the
 scene's reference camera (``scene.camera``) when it has one, else at the
 benchmark's default oblique camera (:func:`phiscene.bench.render.camera_for`).
@@ -33,9 +33,8 @@ import numpy as np
 
 from phiscene.atomic import write_text
 from phiscene.scene import Scene
+from phiscene.transforms import Z_UP_TO_Y_UP
 
-#: Rotation taking phiscene's z-up world to glTF's y-up world: (x, y, z) -> (x, z, -y).
-Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
 #: Ground slab: RGB (0-255), thickness (m), and its size as a multiple of the scene's horizontal extent.
 GROUND_RGB = (209, 209, 204)
 GROUND_THICKNESS = 0.01
@@ -138,7 +137,7 @@ def _legend(scene: Scene, title: str, color_by: str) -> str:
     rows = []
     for o in scene.objects:
         rgb = object_rgb(o, color_by)
-        swatch = "#%02x%02x%02x" % tuple(int(c) for c in rgb)
+        swatch = "#{:02x}{:02x}{:02x}".format(*(int(c) for c in rgb))
         rows.append(f'<li data-object="{html.escape(o.id)}"><span style="background:{swatch}"></span>'
                     f"{html.escape(o.id)} {html.escape(o.description)}</li>")
     return ('<div id="phiscene-legend"><style>#phiscene-legend{position:absolute;top:8px;left:8px;'

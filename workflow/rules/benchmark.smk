@@ -10,11 +10,10 @@ rule benchmark_scene:
         segmentation="results/scenes/{suite}/{scene}/reference/segmentation.png",
         camera="results/scenes/{suite}/{scene}/reference/camera.json",
     wildcard_constraints:
-        suite=alternation([s for s in config["suites"] if "source" not in config["suites"][s]]),
+        suite=alternation(benchmark_suites()),
     params:
         index=scene_index,
-        bench=lambda wc: {**config["benchmark"], **config["suites"][wc.suite].get("benchmark", {}),
-                          "sim": config["sim"], "proxies": config["proxies"]},
+        bench=benchmark_settings,
         cache_dir=CACHE,
         version=V.BENCHMARK,
     log:
@@ -40,9 +39,9 @@ rule front3d_scene:
         image="results/scenes/{suite}/{scene}/reference/image.png",
         segmentation="results/scenes/{suite}/{scene}/reference/segmentation.png",
     wildcard_constraints:
-        suite=alternation([s for s in config["suites"] if "source" in config["suites"][s]]),
+        suite=alternation(source_suites()),
     params:
-        source=lambda wc: config["suites"][wc.suite]["source"],
+        source=suite_source,
         version=V.BENCHMARK,
     log:
         "results/logs/benchmark/{suite}/{scene}.log",

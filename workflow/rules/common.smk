@@ -1,5 +1,6 @@
 # Shared helpers: scene lists, method lookup, paths. Everything a job uses reaches it through params.
 
+import phiscene.config
 import phiscene.versions as V
 
 RESULTS = "results"
@@ -20,8 +21,34 @@ def scene_ids(suite):
 
 
 def scene_index(wildcards):
+    """Position of a job's scene in its suite (the benchmark generator's scene number)."""
     ids = scene_ids(wildcards.suite)
     return ids.index(wildcards.scene)
+
+
+def benchmark_suites():
+    """Suites the embedded benchmark generates (those without a real-data `source`)."""
+    return [s for s in config["suites"] if "source" not in config["suites"][s]]
+
+
+def source_suites():
+    """Suites read from a real-data `source` (3D-FRONT)."""
+    return [s for s in config["suites"] if "source" in config["suites"][s]]
+
+
+def benchmark_settings(wildcards):
+    """`benchmark` with the suite's override deep-merged over it, plus `sim` and `proxies` (phiscene.config)."""
+    return phiscene.config.bench_settings(config, wildcards.suite)
+
+
+def suite_source(wildcards):
+    """The real-data `source` mapping of a job's suite."""
+    return config["suites"][wildcards.suite]["source"]
+
+
+def topology_settings(wildcards):
+    """`topology.<backend>` of a job's backend (defaults when absent)."""
+    return config["topology"].get(wildcards.backend, {})
 
 
 def methods_of_kind(kind):
@@ -70,6 +97,27 @@ def proxies_of(wildcards):
     return method_proxies(wildcards.method, wildcards.suite, wildcards.scene)
 
 
+def scene_of(wildcards):
+    """method_scene of a job's method, suite and scene."""
+    return method_scene(wildcards.method, wildcards.suite, wildcards.scene)
+
+
+def method_topology(wildcards):
+    """The support graph a job's method places by: its `topology` backend's graph of the scene."""
+    backend = config["methods"][wildcards.method]["topology"]
+    return f"results/topology/{backend}/{wildcards.suite}/{wildcards.scene}.json"
+
+
+def method_assembly(wildcards):
+    """Assembly settings of a job's phi_scene-kind method: its `assembly` override deep-merged over `assembly`."""
+    return phiscene.config.method_assembly(config, wildcards.method)
+
+
+def baseline_settings(wildcards):
+    """`methods.<method>.params` of a job's baseline method (defaults when absent)."""
+    return config["methods"][wildcards.method].get("params", {})
+
+
 def alternation(names):
     """Regex alternation of names, or a pattern that matches nothing."""
     return "|".join(names) if names else "(?!x)x"
@@ -79,7 +127,9 @@ def tables_showing(method, suite):
     """The tables with metrics files (phiscene.metrics.evaluate.TABLE_SECTIONS) that show a method on a suite."""
     from phiscene.metrics.evaluate import TABLE_SECTIONS
 
-    return [t for t in TABLE_SECTIONS if config["tables"][t]["suite"] == suite and method in config["tables"][t]["methods"]]
+    return [
+        t for t in TABLE_SECTIONS if config["tables"][t]["suite"] == suite and method in config["tables"][t]["methods"]
+    ]
 
 
 def metric_groups(suite):
@@ -105,8 +155,14 @@ def metric_sections(method, suite):
 
 def metric_tasks(suite, methods):
     """Per method: its sections, and whether it brings its own proxies (params of a metrics job)."""
-    return [{"method": m, "sections": metric_sections(m, suite),
-             "own_proxies": config["methods"][m]["kind"] in OWN_MESH_KINDS} for m in methods]
+    return [
+        {
+            "method": m,
+            "sections": metric_sections(m, suite),
+            "own_proxies": config["methods"][m]["kind"] in OWN_MESH_KINDS,
+        }
+        for m in methods
+    ]
 
 
 def metric_settings(suite, methods):
@@ -138,24 +194,31 @@ def metrics_inputs(suite, methods, scene):
     if "initial" in need:
         inputs["initial"] = f"{base}/initial/scene.json"
     if "reference_dir" in need:
-        inputs.update(image=f"{base}/reference/image.png", segmentation=f"{base}/reference/segmentation.png",
-                      camera=f"{base}/reference/camera.json")
+        inputs.update(
+            image=f"{base}/reference/image.png",
+            segmentation=f"{base}/reference/segmentation.png",
+            camera=f"{base}/reference/camera.json",
+        )
     return inputs
 
 
 def table_inputs(table):
     """Per method of a table: the metrics files of every scene of the table's suite."""
     suite = config["tables"][table]["suite"]
-    return {m: expand(f"results/metrics/{m}/{suite}/{{scene}}.json", scene=scene_ids(suite))
-            for m in config["tables"][table]["methods"]}
+    return {
+        m: expand(f"results/metrics/{m}/{suite}/{{scene}}.json", scene=scene_ids(suite))
+        for m in config["tables"][table]["methods"]
+    }
 
 
 def topology_table_inputs(wildcards):
     """Per backend the predicted support graphs of the topology table's suite, and the ground-truth graphs."""
     suite = config["tables"]["topology"]["suite"]
     scenes = scene_ids(suite)
-    inputs = {b: expand(f"results/topology/{b}/{suite}/{{scene}}.json", scene=scenes)
-              for b in config["tables"]["topology"]["backends"]}
+    inputs = {
+        b: expand(f"results/topology/{b}/{suite}/{{scene}}.json", scene=scenes)
+        for b in config["tables"]["topology"]["backends"]
+    }
     inputs["gt_topology"] = expand(f"results/scenes/{suite}/{{scene}}/gt/topology.json", scene=scenes)
     return inputs
 

@@ -4,12 +4,13 @@
 #   results/demo/{suite}/{scene}.gif (+ .json) a ball thrown into the exported scene of export.demo_method
 # `rule all` builds the demos of the first export.report_demos scenes of each suite (the report shows them).
 
+
 include: "export_common.smk"
 
 
 rule export_scene:
     input:
-        scene=lambda wc: method_scene(wc.method, wc.suite, wc.scene),
+        scene=scene_of,
         proxies=proxies_of,
         topology=export_topology,
     output:
@@ -65,6 +66,10 @@ rule demo:
 
 rule exports:
     input:
-        [f"results/export/{m}/{s}/{scene}/export.json" for m in EXPORT_METHODS for s in EXPORT_SUITES
-         for scene in scene_ids(s)],
+        [
+            f"results/export/{m}/{s}/{scene}/export.json"
+            for m in EXPORT_METHODS
+            for s in EXPORT_SUITES
+            for scene in scene_ids(s)
+        ],
         [f"results/demo/{s}/{scene}.gif" for s in EXPORT_SUITES for scene in scene_ids(s)],

@@ -6,7 +6,7 @@
 rule phi_scene:
     input:
         scene="results/scenes/{suite}/{scene}/initial/scene.json",
-        topology=lambda wc: f"results/topology/{config['methods'][wc.method]['topology']}/{wc.suite}/{wc.scene}.json",
+        topology=method_topology,
         proxies="results/proxies/{suite}/{scene}.npz",
     output:
         scene="results/methods/{method}/{suite}/{scene}/scene.json",
@@ -14,7 +14,7 @@ rule phi_scene:
     wildcard_constraints:
         method=alternation(methods_of_kind("phi_scene")),
     params:
-        assembly=lambda wc: {**config["assembly"], **config["methods"][wc.method].get("assembly", {})},
+        assembly=method_assembly,
         sim=config["sim"],
         cache_dir=CACHE,
         version=V.GROUND,

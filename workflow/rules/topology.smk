@@ -8,7 +8,7 @@ rule topology:
         "results/topology/{backend}/{suite}/{scene}.json",
     params:
         backend="{backend}",
-        settings=lambda wc: config["topology"].get(wc.backend, {}),
+        settings=topology_settings,
         version=V.TOPOLOGY,
     log:
         "results/logs/topology/{backend}/{suite}/{scene}.log",

@@ -14,9 +14,9 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -24,7 +24,7 @@ from phiscene.assembly.penetration import PenetrationParams, SdfBody, resolve_pe
 from phiscene.assembly.settle import SettleParams, settle_object, window_motion
 from phiscene.errors import InputError
 from phiscene.params import Params
-from phiscene.proxies import Proxy
+from phiscene.proxies import Proxy, check_proxies
 from phiscene.scene import Scene
 from phiscene.sim.settings import SimSettings
 from phiscene.transforms import decompose
@@ -140,9 +140,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     if appended:
         log.warning("objects not in the placement order, appended at the end: %s", ", ".join(appended))
     if params.settle:
-        missing = [o for o in order if o not in proxies]
-        if missing:
-            raise InputError(None, "proxies", f"no collision proxies for objects {missing}")
+        check_proxies(scene, proxies, order)
     pp = params.penetration_params
     poses: dict[str, np.ndarray] = {}
     placed: list[SdfBody] = []

@@ -30,9 +30,8 @@ import numpy as np
 
 from phiscene.assembly.settle import window_motion
 from phiscene.baselines.joint_sdf import JointSdfParams, joint_sdf
-from phiscene.errors import InputError
 from phiscene.params import Params
-from phiscene.proxies import Proxy
+from phiscene.proxies import Proxy, check_proxies
 from phiscene.scene import Scene
 from phiscene.sim.settings import SimSettings
 from phiscene.transforms import decompose
@@ -90,13 +89,6 @@ class JointSdfSimParams(Params):
 
 def _finite(v: float) -> float | None:
     return float(v) if np.isfinite(v) else None
-
-
-def check_proxies(scene: Scene, proxies: dict[str, Proxy]) -> None:
-    """Raise :class:`InputError` (field ``proxies``) if an object of ``scene`` has no proxy."""
-    missing = [o.id for o in scene.objects if o.id not in proxies]
-    if missing:
-        raise InputError(scene.source, "proxies", f"no collision proxies for objects {missing}")
 
 
 def joint_sim(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, params: JointSimParams,

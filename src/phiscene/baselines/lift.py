@@ -25,9 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from phiscene.baselines.joint_sim import JointSimParams, check_proxies, joint_sim
+from phiscene.baselines.joint_sim import JointSimParams, joint_sim
 from phiscene.params import Params
-from phiscene.proxies import Proxy
+from phiscene.proxies import Proxy, check_proxies
 from phiscene.scene import Scene
 from phiscene.sim.settings import SimSettings
 from phiscene.topology.graph import GROUND, SupportGraph, check_graph

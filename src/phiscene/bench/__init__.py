@@ -1,4 +1,4 @@
-"""The embedded benchmark (DESIGN.md section 4): scenes built from shipped meshes, physical by construction.
+"""The embedded benchmark (docs/DESIGN.md §4): scenes built from shipped meshes, physical by construction.
 
 Modules: ``assets`` (the asset library), ``cleanmesh`` (making meshes usable rigid
 bodies), ``templates`` (scene templates per suite), ``groundtruth`` (settling,

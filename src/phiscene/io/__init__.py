@@ -1,4 +1,4 @@
-"""Importers of real inputs into phiscene's ``scene.json`` layout (DESIGN §4, "Real data plugs in").
+"""Importers of real inputs into phiscene's ``scene.json`` layout (docs/DESIGN.md §4, "Real data plugs in").
 
 ``sam3d``
     SAM 3D Objects outputs (per-object mesh or GLB + pose in the PyTorch3D camera frame) -> a

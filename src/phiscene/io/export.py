@@ -18,7 +18,7 @@ call of :func:`export_scene` writes into an output folder::
 GLB
     glTF is +Y up (glTF 2.0 spec, "Coordinate System and Units"); phiscene is
     +Z up. The objects hang under one root node ``z_up_to_y_up`` that rotates
-    by -90 degrees about x (:data:`Z_UP_TO_Y_UP`), so the scene stands upright
+    by -90 degrees about x (:data:`phiscene.transforms.Z_UP_TO_Y_UP`), so the scene stands upright
     in glTF viewers and Blender; each object is a node named by its id whose
     matrix is the object's pose (uniform scale included) and whose mesh is the
     local-frame mesh with the object's colour as its base colour.
@@ -91,9 +91,18 @@ import trimesh
 from phiscene.atomic import atomic_path, write_json, write_text
 from phiscene.errors import InputError
 from phiscene.inertia import RigidProps, rigid_props
+from phiscene.proxies import check_proxies
 from phiscene.sim.settings import SimSettings
 from phiscene.tolerances import GRAVITY
-from phiscene.transforms import decompose, make_pose, matrix_to_quat_xyzw, quat_xyzw_to_matrix, rotation_angle
+from phiscene.transforms import (
+    Y_UP_TO_Z_UP,
+    Z_UP_TO_Y_UP,
+    decompose,
+    make_pose,
+    matrix_to_quat_xyzw,
+    quat_xyzw_to_matrix,
+    rotation_angle,
+)
 
 if TYPE_CHECKING:
     import mujoco
@@ -107,9 +116,7 @@ if TYPE_CHECKING:
 URDF_SCENE_FORMAT = "phiscene.urdf_scene/1"
 #: Format tag of ``export.json``.
 EXPORT_FORMAT = "phiscene.export/1"
-#: Root node rotation of the GLB: phiscene's +Z up to glTF's +Y up (-90 degrees about x).
-Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
-#: Name of the GLB root node that carries :data:`Z_UP_TO_Y_UP`.
+#: Name of the GLB root node that carries :data:`phiscene.transforms.Z_UP_TO_Y_UP` (+Z up to glTF's +Y up).
 GLB_ROOT = "z_up_to_y_up"
 #: Colour of objects without one (RGB 0-255).
 DEFAULT_RGB = (150, 150, 150)
@@ -135,12 +142,6 @@ def _check_ids(scene: "Scene") -> None:
     for i, o in enumerate(scene.objects):
         if o.id in (".", "..", "ground"):
             raise InputError(scene.source, f"objects[{i}].id", f"{o.id!r} cannot be exported (reserved name)")
-
-
-def _check_proxies(scene: "Scene", proxies: dict[str, "Proxy"]) -> None:
-    missing = [o.id for o in scene.objects if o.id not in proxies or not proxies[o.id].hulls]
-    if missing:
-        raise InputError(scene.source, "proxies", f"no convex proxies for objects {missing}")
 
 
 def _f(x: float) -> str:
@@ -199,7 +200,7 @@ def read_glb_world_meshes(path: str | Path) -> dict[str, trimesh.Trimesh]:
     Reads the file with trimesh and undoes the +Y-up root (any other root is left as is).
     """
     loaded = trimesh.load(path, force="scene", process=False)
-    to_z_up = np.linalg.inv(Z_UP_TO_Y_UP)
+    to_z_up = Y_UP_TO_Z_UP
     out = {}
     for node in loaded.graph.nodes_geometry:
         transform, geom = loaded.graph[node]
@@ -323,7 +324,7 @@ def export_urdf(scene: "Scene", proxies: dict[str, "Proxy"], out_dir: str | Path
     The path of ``scene_urdf.json``.
     """
     _check_ids(scene)
-    _check_proxies(scene, proxies)
+    check_proxies(scene, proxies)
     out_dir = Path(out_dir)
     props = props or object_props(scene, proxies, sim)
     write_text(out_dir / "urdf" / "ground.urdf", ground_urdf_text(sim))
@@ -509,7 +510,7 @@ def export_mjcf(scene: "Scene", proxies: dict[str, "Proxy"], path: str | Path, s
     """
     from phiscene.sim.mujoco import compile_model, write_mjcf
 
-    _check_proxies(scene, proxies)
+    check_proxies(scene, proxies)
     spec = mjcf_spec(scene, proxies, sim, mj)
     compile_model(spec, sim)  # fail here, with MuJoCo's message, rather than in the user's viewer
     return write_mjcf(spec, path)
@@ -567,7 +568,7 @@ def export_scene(scene: "Scene", proxies: dict[str, "Proxy"], out_dir: str | Pat
     from phiscene.sim.mujoco import MujocoParams
 
     _check_ids(scene)
-    _check_proxies(scene, proxies)
+    check_proxies(scene, proxies)
     mj = mj or MujocoParams()
     out_dir = Path(out_dir)
     for sub in ("urdf", "meshes"):  # stale per-object files of an earlier export
@@ -644,7 +645,7 @@ def release_urdf(index_path: str | Path, seconds: float, upward_offset: float = 
                 out[oid] = make_pose(quat_xyzw_to_matrix(quat), pos)
             return out
 
-        for oid, uid in bodies.items():
+        for uid in bodies.values():
             pos, quat = p.getBasePositionAndOrientation(uid, physicsClientId=client)
             p.resetBasePositionAndOrientation(uid, [pos[0], pos[1], pos[2] + upward_offset], quat,
                                               physicsClientId=client)

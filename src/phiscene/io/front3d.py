@@ -47,12 +47,11 @@ import numpy as np
 from phiscene.atomic import write_json
 from phiscene.errors import InputError
 from phiscene.scene import Scene, SceneObject, load_scene, save_scene
+from phiscene.transforms import Y_UP_TO_Z_UP, transform_points
 
 log = logging.getLogger(__name__)
 
 FORMAT = "phiscene.front3d_import/1"
-#: Rotation (column vectors) taking a y-up frame to z-up: (x, y, z) -> (x, -z, y).
-Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 
 
 @dataclass(frozen=True)
@@ -260,7 +259,7 @@ def _gt_mesh(params: Front3dParams, room: str, name: str):
         mesh = points_mesh(read_points(Path(params.root) / params.surface_dir / room / f"{name}.npy"),
                            params.splat_size)
     if params.up == "y":
-        mesh.vertices = np.asarray(mesh.vertices) @ Y_UP_TO_Z_UP.T
+        mesh.vertices = transform_points(Y_UP_TO_Z_UP, mesh.vertices)
     return mesh
 
 

@@ -62,12 +62,18 @@ from phiscene.atomic import atomic_path, write_json
 from phiscene.errors import InputError
 from phiscene.params import Params
 from phiscene.scene import Scene, SceneObject, load_scene, save_scene
-from phiscene.transforms import decompose, invert, matrix_to_quat_wxyz, quat_wxyz_to_matrix
+from phiscene.transforms import (
+    Y_UP_TO_Z_UP,
+    Z_UP_TO_Y_UP,
+    decompose,
+    invert,
+    matrix_to_quat_wxyz,
+    quat_wxyz_to_matrix,
+    transform_points,
+)
 
 log = logging.getLogger(__name__)
 
-#: Row-vector rotation SAM 3D Objects applies to write its GLB: ``v_glb = v_local @ Z_UP_TO_Y_UP``.
-Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 #: PyTorch3D camera (+X left, +Y up, +Z forward) -> OpenCV camera (x right, y down, z forward).
 CV_FROM_P3D = np.diag([-1.0, -1.0, 1.0, 1.0])
 #: Mesh file names of the two variants.
@@ -204,7 +210,8 @@ def read_pose(path: Path) -> tuple[np.ndarray, dict]:
     except (TypeError, ValueError):
         raise InputError(path, "scale", f"not numeric: {data['scale']!r}") from None
     if s.size not in (1, 3) or not np.all(np.isfinite(s)) or np.any(s <= 0):
-        raise InputError(path, "scale", f"expected a positive number or 3 equal positive numbers, got {data['scale']!r}")
+        raise InputError(path, "scale",
+                         f"expected a positive number or 3 equal positive numbers, got {data['scale']!r}")
     if np.ptp(s) > 1e-6 * s.max():
         raise InputError(path, "scale", f"anisotropic scale {s.tolist()}: phiscene poses take one uniform scale")
     extra = {k: v for k, v in data.items() if k not in ("rotation", "translation", "scale")}
@@ -369,7 +376,7 @@ def read_object(folder: Path) -> Sam3dObject:
     variant = MESH_FILES[found[0].name]
     mesh = load_mesh(found[0]).copy()
     if variant == "glb":
-        mesh.vertices = np.asarray(mesh.vertices) @ Z_UP_TO_Y_UP.T  # v_local = v_glb A^T
+        mesh.vertices = transform_points(Y_UP_TO_Z_UP, mesh.vertices)  # SAM 3D Objects writes its GLB y-up
     pose, extra = read_pose(folder / "pose.json")
     color = extra.get("color")
     if color is not None:
@@ -610,7 +617,7 @@ def export_sam3d(scene: Scene, out_dir: str | Path, world_to_p3d: np.ndarray, va
         if o.color is not None:
             d["color"] = [int(c) for c in o.color]
         if variant == "glb":
-            m.vertices = np.asarray(m.vertices) @ Z_UP_TO_Y_UP
+            m.vertices = transform_points(Z_UP_TO_Y_UP, m.vertices)
         save_mesh(m, out_dir / o.id / ("mesh.ply" if variant == "mesh" else "mesh.glb"))
         write_json(out_dir / o.id / "pose.json", d)
     if write_floor:

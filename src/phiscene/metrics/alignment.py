@@ -2,7 +2,7 @@
 
 The paper scores alignment with the reference image by CLIP image similarity.
 No CLIP weights are reachable here, so phiscene uses a stricter and more
-interpretable stand-in (DESIGN §5): the scene is rendered from the reference
+interpretable stand-in (docs/DESIGN.md §5): the scene is rendered from the reference
 camera with the benchmark renderer (:func:`phiscene.bench.render.render_instance_mask`)
 and each object's *visible* mask is compared with its mask in the reference
 instance segmentation.

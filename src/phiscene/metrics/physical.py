@@ -230,12 +230,11 @@ def drift_bullet(scene: "Scene", proxies: dict[str, "Proxy"], params: PhysicalPa
         An object has no proxy.
     """
     from phiscene.inertia import rigid_props
+    from phiscene.proxies import check_proxies
+    from phiscene.scene import ground_below
     from phiscene.sim.bullet import BulletWorld
-    from phiscene.sim.mujoco import ground_below
 
-    missing = [o.id for o in scene.objects if o.id not in proxies]
-    if missing:
-        raise InputError(scene.source, "proxies", f"no collision proxies for objects {missing}")
+    check_proxies(scene, proxies)
     offset = np.array([0.0, 0.0, float(params.upward_offset)])
     floor = ground_below(scene)
     with BulletWorld(sim, cache_dir) as world:

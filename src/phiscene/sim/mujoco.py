@@ -68,9 +68,10 @@ from phiscene.atomic import write_text
 from phiscene.errors import InputError
 from phiscene.inertia import RigidProps, rigid_props
 from phiscene.params import Params
+from phiscene.scene import ground_below
 from phiscene.sim.settings import SimSettings
 from phiscene.tolerances import GRAVITY
-from phiscene.transforms import decompose, make_pose, matrix_to_quat_wxyz, rotation_angle, transform_points
+from phiscene.transforms import decompose, make_pose, matrix_to_quat_wxyz, rotation_angle
 
 if TYPE_CHECKING:  # heavy import only for type checkers
     import mujoco
@@ -185,13 +186,6 @@ def contact_friction(sim: SimSettings) -> np.ndarray:
     """
     f = sim.friction
     return np.array([f * f, 2.0 * f * sim.spinning_friction, 2.0 * f * sim.rolling_friction], dtype=float)
-
-
-def ground_below(scene: "Scene") -> float:
-    """Height of a ground right below the scene: the lowest world z of all object meshes (m)."""
-    if not scene.objects:
-        raise InputError(scene.source, "objects", "scene has no objects")
-    return float(min(transform_points(o.pose, o.mesh().vertices)[:, 2].min() for o in scene.objects))
 
 
 def body_frame(pose: np.ndarray, props: RigidProps) -> np.ndarray:

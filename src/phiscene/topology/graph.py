@@ -3,7 +3,7 @@
 An edge ``from -> to`` means that ``from`` physically carries (part of) the
 weight of ``to`` (paper Eq. 2; the edge fields follow the paper's MLLM schema).
 The ground is the node ``"ground"``; it only ever supports. The file format is
-DESIGN §3's topology JSON (schema ``phiscene.topology/1``)::
+docs/DESIGN.md §3's topology JSON (schema ``phiscene.topology/1``)::
 
     {"format": "phiscene.topology/1", "backend": "geometric",
      "objects": ["ground", "obj_01", ...],
@@ -17,9 +17,9 @@ gets it. ``order`` lists every non-ground object exactly once.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Iterable, Sequence
 
 from phiscene import schemas
 from phiscene.atomic import write_json
@@ -144,7 +144,7 @@ class SupportGraph:
         return replace(self, edges=list(edges), **changes)
 
     def to_dict(self) -> dict:
-        """The topology JSON document (DESIGN §3)."""
+        """The topology JSON document (docs/DESIGN.md §3)."""
         out = {"format": FORMAT, "backend": self.backend, "objects": list(self.objects),
                "edges": [e.to_dict() for e in self.edges], "order": list(self.order),
                "dropped_edges": [e.to_dict() for e in self.dropped_edges]}

@@ -1,0 +1,257 @@
+"""The workflow configuration (``config/config.yaml``): which parameter class reads each section, and its checks.
+
+Every section of ``config.yaml`` that a stage reads is parsed by a :class:`~phiscene.params.Params`
+dataclass (or, for a real-data source, a dataclass with the same ``from_dict`` contract). This module
+names them in one place and offers the three things the workflow needs while it builds the DAG:
+
+- :func:`deep_merge`: a method's ``assembly:`` override (or a suite's ``benchmark:`` override) merged
+  over the defaults key by key at every depth, so ``assembly: {penetration_params: {eps: 0.01}}``
+  keeps the other ``penetration_params`` keys of ``config.yaml``;
+- :func:`method_assembly` and :func:`bench_settings`: the merged mappings that jobs receive;
+- :func:`check_config`: every parameter class run on its section (and on each merged override), so
+  ``snakemake -n`` rejects a misspelled key before any job runs, with one line naming the config path
+  and the key, e.g. ``config: assembly.penetration_params: unknown key 'epsilon' (known: backtrack_steps,
+  eps, lr, ...)``.
+
+Sections and their classes (``module:Class``, imported when a config is checked):
+
+:data:`SECTIONS`
+    Fixed paths: ``proxies``, ``sim``, ``assembly``, ``benchmark``, ``metrics.<name>``, ``export.demo``.
+:data:`BASELINE_PARAMS`
+    ``methods.<name>.params`` by the method's ``kind``.
+:data:`SOURCE_PARAMS`
+    ``suites.<suite>.source`` by the source's ``kind``.
+``topology.<backend>``
+    The backend's own class (:func:`phiscene.topology.get_backend`).
+
+``config/schema.yaml`` lists, for each of these sections, exactly the fields of its class
+(``tests/test_config.py`` keeps the two in sync); the schema checks types and ranges, these classes
+check keys and their own value rules.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import fields
+from importlib import import_module
+from pathlib import Path
+from typing import Any
+
+from phiscene.params import nested_params
+
+__all__ = ["BASELINE_PARAMS", "SECTIONS", "SOURCE_PARAMS", "ConfigError", "bench_settings", "check_config",
+           "check_params", "deep_merge", "load_class", "method_assembly", "schema_sections"]
+
+#: Config path -> parameter class of the fixed sections.
+SECTIONS: dict[str, str] = {
+    "proxies": "phiscene.proxies:ProxyParams",
+    "sim": "phiscene.sim.settings:SimSettings",
+    "assembly": "phiscene.assembly.assemble:AssemblyParams",
+    "benchmark": "phiscene.bench.build:BenchParams",
+    "metrics.physical": "phiscene.metrics.physical:PhysicalParams",
+    "metrics.recon": "phiscene.metrics.reconstruction:ReconParams",
+    "metrics.alignment": "phiscene.metrics.alignment:AlignmentParams",
+    "metrics.mujoco": "phiscene.sim.mujoco:MujocoParams",
+    "export.demo": "phiscene.demo:DemoParams",
+}
+
+#: Baseline method kind -> parameter class of its ``methods.<name>.params`` (a kind not listed takes no check).
+BASELINE_PARAMS: dict[str, str] = {
+    "joint_sdf": "phiscene.baselines.joint_sdf:JointSdfParams",
+    "joint_sim": "phiscene.baselines.joint_sim:JointSimParams",
+    "joint_sdf_sim": "phiscene.baselines.joint_sim:JointSdfSimParams",
+    "lift_sim": "phiscene.baselines.lift:LiftParams",
+    "external": "phiscene.baselines.external:ImportParams",
+}
+
+#: Real-data source kind -> parameter class of ``suites.<suite>.source``.
+SOURCE_PARAMS: dict[str, str] = {
+    "front3d": "phiscene.io.front3d:Front3dParams",
+}
+
+
+class ConfigError(ValueError):
+    """A bad ``config.yaml`` value; the message is one line starting ``config: <path>:``."""
+
+
+def load_class(spec: str) -> type:
+    """The class named by ``"module:Class"``."""
+    module, _, name = spec.partition(":")
+    return getattr(import_module(module), name)
+
+
+def deep_merge(base: Mapping[str, Any] | None, override: Mapping[str, Any] | None) -> dict:
+    """``override`` merged over ``base`` at every depth (neither argument is modified).
+
+    A key whose values are mappings on both sides is merged recursively; any other value of
+    ``override`` (a scalar, a list, ``None``) replaces the one of ``base``.
+
+    Examples
+    --------
+    >>> deep_merge({"a": 1, "p": {"eps": 0.005, "lr": 0.005}}, {"p": {"eps": 0.01}})
+    {'a': 1, 'p': {'eps': 0.01, 'lr': 0.005}}
+    """
+    out = {k: (deep_merge(v, None) if isinstance(v, Mapping) else v) for k, v in (base or {}).items()}
+    for key, value in (override or {}).items():
+        if isinstance(value, Mapping) and isinstance(out.get(key), Mapping):
+            out[key] = deep_merge(out[key], value)
+        elif isinstance(value, Mapping):
+            out[key] = deep_merge(value, None)
+        else:
+            out[key] = value
+    return out
+
+
+def method_assembly(config: Mapping[str, Any], method: str) -> dict:
+    """The ``assembly`` settings of a ``phi_scene``-kind method: its override deep-merged over ``assembly``."""
+    return deep_merge(config.get("assembly"), config["methods"][method].get("assembly"))
+
+
+def bench_settings(config: Mapping[str, Any], suite: str) -> dict:
+    """The benchmark settings of a suite's scenes (the params of the benchmark rule).
+
+    ``benchmark`` with the suite's ``benchmark`` override deep-merged over it, plus the shared ``sim``
+    and ``proxies`` sections; :func:`phiscene.bench.build.build_scene` completes it from the suite's
+    defaults.
+    """
+    merged = deep_merge(config.get("benchmark"), config["suites"][suite].get("benchmark"))
+    return {**merged, "sim": config.get("sim") or {}, "proxies": config.get("proxies") or {}}
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())
+
+
+def check_params(cls: type, data: Any, path: str) -> Any:
+    """Parse ``data`` with parameter class ``cls``, or raise :class:`ConfigError` naming ``path``.
+
+    Unknown keys are looked for at every nesting level first (nested :class:`~phiscene.params.Params`
+    fields), so the error names the deepest path; then ``cls.from_dict`` runs the class's own checks.
+
+    Parameters
+    ----------
+    cls
+        A dataclass with a ``from_dict`` class method (a :class:`~phiscene.params.Params` subclass).
+    data
+        The section: a mapping, or ``None`` for the defaults.
+    path
+        Its dotted config path (``assembly``, ``methods.seq_sdf_only.assembly``, ...).
+
+    Returns
+    -------
+    The parsed instance.
+
+    Raises
+    ------
+    ConfigError
+        ``config: <path>: unknown key 'k' (known: ...)``, ``config: <path>: expected a mapping ...``
+        or ``config: <path>: <the class's own ValueError>``.
+    """
+    if data is None:
+        data = {}
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"config: {path}: expected a mapping of {cls.__name__} keys, got {data!r}")
+    known = sorted(f.name for f in fields(cls))
+    unknown = sorted(set(map(str, data)) - set(known))
+    if unknown:
+        keys = ", ".join(repr(k) for k in unknown)
+        raise ConfigError(f"config: {path}: unknown key{'s' if len(unknown) > 1 else ''} {keys} "
+                          f"(known: {', '.join(known)})")
+    for name, sub in nested_params(cls).items():
+        if name in data and not isinstance(data[name], sub):
+            check_params(sub, data[name], f"{path}.{name}")
+    try:
+        return cls.from_dict(data)
+    except (ValueError, TypeError) as exc:
+        raise ConfigError(f"config: {path}: {_one_line(exc)}") from None
+
+
+def _section(config: Mapping[str, Any], path: str) -> tuple[bool, Any]:
+    """(present, value) of a dotted path."""
+    node: Any = config
+    for part in path.split("."):
+        if not isinstance(node, Mapping) or part not in node:
+            return False, None
+        node = node[part]
+    return True, node
+
+
+def _mapping(value: Any, path: str) -> Mapping:
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping):
+        raise ConfigError(f"config: {path}: expected a mapping, got {value!r}")
+    return value
+
+
+def schema_sections(schema_path: str | Path) -> list[str]:
+    """Top-level sections a config may have: the ``properties`` of ``config/schema.yaml``."""
+    import yaml
+
+    with open(schema_path, encoding="utf-8") as f:
+        return sorted(yaml.safe_load(f)["properties"])
+
+
+def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -> None:
+    """Run every parameter class on its config section; raise one :class:`ConfigError` for the first bad one.
+
+    Checked: unknown top-level sections (when ``sections`` is given), the fixed :data:`SECTIONS`,
+    every suite's merged benchmark settings (:func:`bench_settings`) and real-data ``source``,
+    ``topology.<backend>`` with the backend's class, every ``phi_scene``-kind method's merged
+    ``assembly`` (:func:`method_assembly`) and every baseline's ``params`` (:data:`BASELINE_PARAMS`).
+
+    Parameters
+    ----------
+    config
+        The workflow config (``config.yaml`` with any ``--configfile`` overrides merged).
+    sections
+        Known top-level sections (:func:`schema_sections` of ``config/schema.yaml``); ``None`` skips
+        that check.
+
+    Raises
+    ------
+    ConfigError
+        One line: ``config: <path>: <problem>``.
+    """
+    config = _mapping(config, "(top level)")
+    if sections is not None:
+        unknown = sorted(set(config) - set(sections))
+        if unknown:
+            raise ConfigError(f"config: unknown section {unknown[0]!r} (known: {', '.join(sorted(sections))})")
+    for path, spec in SECTIONS.items():
+        present, value = _section(config, path)
+        if present:
+            check_params(load_class(spec), value, path)
+
+    from phiscene.bench.build import BenchParams, with_suite_defaults
+
+    for suite, spec in _mapping(config.get("suites"), "suites").items():
+        spec = _mapping(spec, f"suites.{suite}")
+        if "source" in spec:
+            source = _mapping(spec["source"], f"suites.{suite}.source")
+            kind = source.get("kind")
+            if kind not in SOURCE_PARAMS:
+                raise ConfigError(f"config: suites.{suite}.source.kind: unknown source kind {kind!r} "
+                                  f"(known: {', '.join(sorted(SOURCE_PARAMS))})")
+            check_params(load_class(SOURCE_PARAMS[kind]), source, f"suites.{suite}.source")
+        else:
+            check_params(BenchParams, spec.get("benchmark"), f"suites.{suite}.benchmark")
+            merged = with_suite_defaults(suite, bench_settings(config, suite))
+            check_params(BenchParams, merged, f"suites.{suite}.benchmark")
+
+    from phiscene.topology import backend_names, get_backend
+
+    for backend, settings in _mapping(config.get("topology"), "topology").items():
+        if backend not in backend_names():
+            raise ConfigError(f"config: topology: unknown backend {backend!r} (known: {', '.join(backend_names())})")
+        check_params(get_backend(backend).params_cls, settings, f"topology.{backend}")
+
+    for name, spec in _mapping(config.get("methods"), "methods").items():
+        spec = _mapping(spec, f"methods.{name}")
+        kind = spec.get("kind")
+        if kind == "phi_scene":
+            _mapping(spec.get("assembly"), f"methods.{name}.assembly")  # a non-mapping override: one line too
+            check_params(load_class(SECTIONS["assembly"]), method_assembly(config, name), f"methods.{name}.assembly")
+        elif kind in BASELINE_PARAMS:
+            check_params(load_class(BASELINE_PARAMS[kind]), spec.get("params"), f"methods.{name}.params")
+

@@ -1,0 +1,270 @@
+"""The workflow configuration: deep-merged overrides, one-line key checks while the DAG is built, schema in sync."""
+
+import copy
+import json
+import os
+import subprocess
+import sys
+import typing
+from dataclasses import fields
+from pathlib import Path
+
+import jsonschema
+import pytest
+import yaml
+
+from phiscene.config import (
+    BASELINE_PARAMS,
+    SECTIONS,
+    SOURCE_PARAMS,
+    ConfigError,
+    check_config,
+    deep_merge,
+    load_class,
+    method_assembly,
+    schema_sections,
+)
+from phiscene.params import Params, nested_params
+from phiscene.topology import get_backend
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG = yaml.safe_load((ROOT / "config/config.yaml").read_text())
+SCHEMA = yaml.safe_load((ROOT / "config/schema.yaml").read_text())
+BUILTIN_BACKENDS = ("geometric", "height", "given", "mllm")
+
+
+def dry_run(tmp_path, overrides: dict):
+    """`snakemake -n` of the phys table with `overrides` as a --configfile, in an empty folder."""
+    cfg = tmp_path / "override.yaml"
+    cfg.write_text(yaml.safe_dump(overrides))
+    env = {**os.environ, "PYTHONHASHSEED": "0"}
+    cmd = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "--directory", str(tmp_path / "run"),
+           "-n", "-j1", "--configfile", str(cfg), "--", "results/tables/phys.csv"]
+    res = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    return res.returncode, res.stdout + res.stderr
+
+
+# ---------------------------------------------------------------------------------------------------- merging
+
+
+def test_deep_merge_merges_every_level_and_copies():
+    base = {"a": 1, "p": {"x": 1, "y": {"u": 1, "v": 2}}, "l": [1, 2]}
+    over = {"p": {"y": {"v": 3}}, "l": [9], "new": {"k": 0}}
+    merged = deep_merge(base, over)
+    assert merged == {"a": 1, "p": {"x": 1, "y": {"u": 1, "v": 3}}, "l": [9], "new": {"k": 0}}
+    merged["p"]["y"]["u"] = 99
+    assert base["p"]["y"]["u"] == 1 and over == {"p": {"y": {"v": 3}}, "l": [9], "new": {"k": 0}}
+    assert deep_merge(base, None) == base and deep_merge(None, over) == over
+
+
+def _shifted(section: dict) -> dict:
+    """Every number of a config section changed (ints + 1, floats halved), so no value equals a dataclass default."""
+    out = {}
+    for key, value in section.items():
+        if isinstance(value, dict):
+            out[key] = _shifted(value)
+        elif isinstance(value, bool) or not isinstance(value, (int, float)):
+            out[key] = value
+        else:
+            out[key] = value + 1 if isinstance(value, int) else value * 0.5
+    return out
+
+
+@pytest.mark.parametrize("shift", [False, True], ids=["config.yaml", "shifted"])
+def test_method_override_of_one_nested_key_keeps_the_other_keys_of_config_yaml(shift):
+    from phiscene.assembly.assemble import AssemblyParams
+
+    config = copy.deepcopy(CONFIG)
+    if shift:  # a config.yaml whose values all differ from the dataclass defaults: a fallback would show
+        config["assembly"] = _shifted(config["assembly"])
+    base = copy.deepcopy(config["assembly"])
+    config["methods"]["tight"] = {"kind": "phi_scene", "topology": "geometric",
+                                  "assembly": {"penetration_params": {"eps": 0.01}, "settle_params": {"window": 7}}}
+    check_config(config, schema_sections(ROOT / "config/schema.yaml"))
+    p = AssemblyParams.from_dict(method_assembly(config, "tight"))
+    defaults = AssemblyParams()
+    assert p.penetration_params.eps == 0.01 and p.settle_params.window == 7
+    for name, override in (("penetration_params", "eps"), ("settle_params", "window")):
+        for key, value in base[name].items():
+            if key != override:
+                assert getattr(getattr(p, name), key) == value, (name, key)
+                if shift:
+                    assert getattr(getattr(defaults, name), key) != value, (name, key)
+    assert p.penetration == base["penetration"] and p.settle == base["settle"]
+
+
+@pytest.mark.workflow
+def test_grounding_job_receives_the_deep_merged_override(tmp_path):
+    """End to end: one tiny scene grounded by a method overriding one nested key; its assembly log's params."""
+    overrides = {"suites": {"contact": {"n_scenes": 1}}, "proxies": {"backend": "convex"},
+                 "benchmark": {"n_objects": [2, 2], "render": {"width": 64, "height": 48}},
+                 "assembly": {"penetration_params": {"n_active": 256, "n_context": 256}},
+                 "methods": {"tight": {"kind": "phi_scene", "topology": "height",
+                                       "assembly": {"penetration_params": {"eps": 0.004}}}}}
+    cfg = tmp_path / "override.yaml"
+    cfg.write_text(yaml.safe_dump(overrides))
+    target = "results/methods/tight/contact/scene_000/assembly.json"
+    cmd = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "--directory", str(tmp_path / "run"),
+           "-j2", "--configfile", str(cfg), "--", target]
+    res = subprocess.run(cmd, cwd=ROOT, env={**os.environ, "PYTHONHASHSEED": "0"}, capture_output=True, text=True,
+                         timeout=600)
+    assert res.returncode == 0, res.stderr[-3000:]
+    got = json.loads((tmp_path / "run" / target).read_text())["params"]
+    want_pen = {**CONFIG["assembly"]["penetration_params"], "n_active": 256, "n_context": 256, "eps": 0.004}
+    assert {k: got["penetration_params"][k] for k in want_pen} == want_pen
+    assert {k: got["settle_params"][k] for k in CONFIG["assembly"]["settle_params"]} == \
+        CONFIG["assembly"]["settle_params"]
+
+
+# ---------------------------------------------------------------------------------------------------- checks
+
+
+@pytest.mark.parametrize("edit, path, key", [
+    (lambda c: c["assembly"]["penetration_params"].update(epsilon=0.01), "assembly.penetration_params", "epsilon"),
+    (lambda c: c["methods"]["seq_sdf_only"].update(assembly={"settle_params": {"windw": 5}}),
+     "methods.seq_sdf_only.assembly.settle_params", "windw"),
+    (lambda c: c["benchmark"]["degrade"].update(sigma=1.0), "benchmark.degrade", "sigma"),
+    (lambda c: c["suites"]["contact"].update(benchmark={"gt": {"settle_second": 1}}), "suites.contact.benchmark.gt",
+     "settle_second"),
+    (lambda c: c["topology"]["geometric"].update(gap=0.1), "topology.geometric", "gap"),
+    (lambda c: c["metrics"]["mujoco"].update(solver="cg"), "metrics.mujoco", "solver"),
+    (lambda c: c["export"]["demo"].update(speeed=1), "export.demo", "speeed"),
+    (lambda c: c["methods"]["joint_sdf_sim"].update(params={"sdf": {"grid": {"res": 8}}}),
+     "methods.joint_sdf_sim.params.sdf.grid", "res"),
+    (lambda c: c["suites"].update(front={"source": {"kind": "front3d", "root": "x", "rooms": "r.json"}}),
+     "suites.front.source", "rooms"),
+])
+def test_unknown_key_is_named_with_its_path(edit, path, key):
+    config = copy.deepcopy(CONFIG)
+    edit(config)
+    with pytest.raises(ConfigError) as err:
+        check_config(config)
+    msg = str(err.value)
+    assert msg.startswith(f"config: {path}: unknown key '{key}' (known: ") and "\n" not in msg, msg
+
+
+def test_value_rules_of_the_classes_run_too():
+    config = copy.deepcopy(CONFIG)
+    config["benchmark"]["n_objects"] = [5, 2]
+    with pytest.raises(ConfigError, match=r"^config: benchmark: .*n_objects"):
+        check_config(config)
+    config = copy.deepcopy(CONFIG)
+    config["topology"]["voxel"] = {}
+    with pytest.raises(ConfigError, match=r"^config: topology: unknown backend 'voxel'"):
+        check_config(config)
+
+
+def test_unknown_top_level_section_rejected():
+    sections = schema_sections(ROOT / "config/schema.yaml")
+    check_config(CONFIG, sections)
+    config = {**copy.deepcopy(CONFIG), "assemby": {"settle": False}}
+    with pytest.raises(ConfigError, match=r"^config: unknown section 'assemby' \(known: .*assembly"):
+        check_config(config, sections)
+    with pytest.raises(jsonschema.ValidationError):  # the schema says the same
+        jsonschema.validate(config, SCHEMA)
+
+
+def test_dry_run_accepts_the_default_config_and_rejects_a_misspelled_nested_key(tmp_path):
+    rc, out = dry_run(tmp_path, {"suites": {"contact": {"n_scenes": 1}}})
+    assert rc == 0 and "phys_table" in out, out[-3000:]
+    rc, out = dry_run(tmp_path, {"assembly": {"penetration_params": {"epsilon": 0.01}}})
+    assert rc != 0
+    assert "config: assembly.penetration_params: unknown key 'epsilon' (known: " in out, out[-3000:]
+    assert "Traceback" not in out and not (tmp_path / "run/results").exists()
+
+
+def test_dry_run_rejects_a_misspelled_key_of_a_method_override_and_an_unknown_section(tmp_path):
+    rc, out = dry_run(tmp_path, {"methods": {"phi_scene": {"assembly": {"settle_params": {"max_frame": 9}}}}})
+    assert rc != 0 and "config: methods.phi_scene.assembly.settle_params: unknown key 'max_frame'" in out, out[-3000:]
+    rc, out = dry_run(tmp_path, {"metric": {"physical": {"samples": 64}}})
+    assert rc != 0 and "config: unknown section 'metric'" in out, out[-3000:]
+
+
+# ---------------------------------------------------------------------------------------------------- schema
+
+
+def _resolve(node: dict) -> dict:
+    ref = node.get("$ref")
+    if ref is None:
+        return node
+    assert ref.startswith("#/$defs/"), ref
+    return SCHEMA["$defs"][ref.removeprefix("#/$defs/")]
+
+
+def _json_types(annotation) -> set[str]:
+    """JSON types a field annotation allows (independent of the schema file)."""
+    if isinstance(annotation, str):
+        annotation = eval(annotation, vars(typing) | {"tuple": tuple})  # noqa: S307  (dataclass annotations)
+    names = {int: "integer", float: "number", bool: "boolean", str: "string", tuple: "array", type(None): "null"}
+    args = typing.get_args(annotation) if typing.get_origin(annotation) in (typing.Union, type(int | None)) else ()
+    if args:
+        return set().union(*(_json_types(a) for a in args))
+    origin = typing.get_origin(annotation) or annotation
+    return {names[origin]}
+
+
+def _classes() -> dict[str, type]:
+    """Every parameter class a config section is parsed with, and their nested ones, by name."""
+    roots = [load_class(s) for s in [*SECTIONS.values(), *BASELINE_PARAMS.values(), *SOURCE_PARAMS.values()]]
+    roots += [get_backend(b).params_cls for b in BUILTIN_BACKENDS]
+    out = {}
+
+    def add(cls):
+        out[cls.__name__] = cls
+        for sub in nested_params(cls).values():
+            add(sub)
+
+    for cls in roots:
+        add(cls)
+    return out
+
+
+@pytest.mark.parametrize("name", sorted(_classes()))
+def test_schema_lists_exactly_the_fields_of_each_parameter_class(name):
+    cls = _classes()[name]
+    entry = SCHEMA["$defs"][name]
+    assert entry["additionalProperties"] is False and entry["type"] == "object"
+    assert list(entry["properties"]) == [f.name for f in fields(cls)]
+    nested = nested_params(cls)
+    for f in fields(cls):
+        prop = entry["properties"][f.name]
+        if f.name in nested:
+            assert prop == {"$ref": f"#/$defs/{nested[f.name].__name__}"}, f.name
+            continue
+        allowed = _json_types(f.type)
+        if "enum" in prop:
+            assert {_json_types(type(v)).pop() for v in prop["enum"]} <= allowed, f.name
+        else:
+            declared = {prop["type"]} if isinstance(prop["type"], str) else set(prop["type"])
+            assert declared == allowed or (allowed == {"number"} and declared == {"integer"}), (f.name, declared)
+    assert issubclass(cls, Params) or hasattr(cls, "from_dict")
+
+
+def test_schema_defs_are_exactly_the_parameter_classes():
+    assert set(SCHEMA["$defs"]) == set(_classes())
+
+
+def test_every_section_refers_to_its_class():
+    props = SCHEMA["properties"]
+    for path, spec in SECTIONS.items():
+        node = {"properties": props}
+        for part in path.split("."):
+            node = _resolve(node)["properties"][part]
+        assert node.get("$ref") == f"#/$defs/{load_class(spec).__name__}", path
+    topo = props["topology"]["properties"]
+    assert {b: topo[b]["$ref"] for b in BUILTIN_BACKENDS} == \
+        {b: f"#/$defs/{get_backend(b).params_cls.__name__}" for b in BUILTIN_BACKENDS}
+    method = props["methods"]["additionalProperties"]
+    assert method["properties"]["assembly"]["$ref"] == f"#/$defs/{load_class(SECTIONS['assembly']).__name__}"
+    by_kind = {rule["if"]["properties"]["kind"]["const"]: rule["then"] for rule in method["allOf"]}
+    for kind, spec in BASELINE_PARAMS.items():
+        assert by_kind[kind]["properties"]["params"]["$ref"] == f"#/$defs/{load_class(spec).__name__}", kind
+    suite = props["suites"]["additionalProperties"]["properties"]
+    assert suite["benchmark"]["$ref"] == f"#/$defs/{load_class(SECTIONS['benchmark']).__name__}"
+    assert suite["source"]["$ref"] == f"#/$defs/{load_class(SOURCE_PARAMS['front3d']).__name__}"
+
+
+def test_default_config_passes_schema_and_classes():
+    jsonschema.Draft202012Validator.check_schema(SCHEMA)
+    jsonschema.validate(CONFIG, SCHEMA)
+    check_config(CONFIG, schema_sections(ROOT / "config/schema.yaml"))
