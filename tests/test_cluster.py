@@ -8,7 +8,6 @@ resources its rule declares.
 """
 
 import collections
-import json
 import os
 import re
 import subprocess
@@ -27,7 +26,8 @@ TARGET = "results/tables/phys.csv"
 
 def _job_script(path: Path, body: str, rule: str = "r", mem_mb: int = 100, runtime: float = 1.0) -> Path:
     """A job script as Snakemake writes one (``# properties`` line with the rule's resources)."""
-    props = json.dumps({"rule": rule, "jobid": 7, "threads": 1, "resources": {"mem_mb": mem_mb, "runtime": runtime}})
+    props = ('{"rule": "%s", "jobid": 7, "threads": 1, "resources": {"mem_mb": %d, "runtime": %s}}'
+             % (rule, mem_mb, runtime))
     path.write_text(f"#!/bin/sh\n# properties = {props}\n{body}\n")
     return path
 
