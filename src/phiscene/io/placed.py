@@ -1,0 +1,320 @@
+"""Scenes made of per-object meshes already placed in one frame -> a levelled ``initial/scene.json``.
+
+This is what most 3D foundation-model pipelines write: one mesh file per object (GLB, PLY or OBJ), every
+vertex already in the common scene frame (or placed by an optional per-object transform), a known up-axis
+convention (glTF files are y-up) and a camera whose pitch leaves gravity off by a few to 20 degrees.
+
+:func:`read_placed_dir` reads such a folder; :func:`import_placed` levels the scene with
+:func:`phiscene.levelling.estimate_up` (the camera's up as the prior) and writes the benchmark layout, so every
+stage downstream runs unchanged::
+
+    OUT_DIR/initial/scene.json, OUT_DIR/initial/meshes/<id>.glb   object meshes, local frame centred on the box
+    OUT_DIR/reference/camera.json                                  when a camera is known
+    OUT_DIR/import.json                                            source, up convention, the levelling applied
+
+Placement file (``--placements``, optional): ``{"<id>": {"pos": [x, y, z], "quat": [w, x, y, z]}}`` or
+``{"<id>": 4x4}``, in the source frame, applied to the mesh's vertices (the REST3D ``simulation.json`` layout
+is read by :mod:`phiscene.io.rest3d`).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from phiscene.atomic import write_json
+from phiscene.errors import InputError
+from phiscene.levelling import LevelParams, UpEstimate, angle_deg, estimate_up, levelling_transform
+from phiscene.params import Params
+from phiscene.scene import Scene, SceneObject, load_scene, save_scene
+from phiscene.transforms import Y_UP_TO_Z_UP, quat_wxyz_to_matrix, rigidity_error
+
+log = logging.getLogger(__name__)
+
+#: Format tag of ``import.json``.
+IMPORT_FORMAT = "phiscene.placed_import/1"
+#: Mesh file suffixes read as objects.
+MESH_SUFFIXES = (".glb", ".gltf", ".ply", ".obj")
+
+
+@dataclass(frozen=True)
+class PlacedParams(Params):
+    """Settings of a placed-mesh import.
+
+    Attributes
+    ----------
+    up
+        Up-axis convention of the source files: ``y`` (glTF, SAM 3D Objects' GLBs) or ``z``.
+    level
+        Estimate gravity and level the scene (false: trust the up convention).
+    levelling
+        See :class:`phiscene.levelling.LevelParams`.
+    image_width, image_height
+        Size of the reference camera's image when the source gives only a field of view.
+    """
+
+    _label = "import parameters"
+
+    up: str = "y"
+    level: bool = True
+    levelling: LevelParams = field(default_factory=LevelParams)
+    image_width: int = 640
+    image_height: int = 480
+
+    def check(self) -> None:
+        """Reject an unknown up axis or image size (``ValueError``)."""
+        if self.up not in ("y", "z"):
+            raise ValueError(f"import parameter 'up' must be 'y' or 'z', got {self.up!r}")
+        if self.image_width < 1 or self.image_height < 1:
+            raise ValueError("import parameters 'image_width' and 'image_height' must be >= 1")
+
+
+@dataclass
+class PlacedObject:
+    """One object of a placed-mesh scene.
+
+    Attributes
+    ----------
+    id
+        Object id (file stem, sanitised).
+    mesh
+        The mesh with its vertices in the source frame.
+    description
+        Free text (from the file stem unless given).
+    source
+        The file it came from.
+    """
+
+    id: str
+    mesh: trimesh.Trimesh
+    description: str
+    source: Path
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A reference camera in the source frame.
+
+    Attributes
+    ----------
+    eye, target : (3,) float
+        Camera centre and a point it looks at.
+    fov_y_deg
+        Vertical field of view.
+    """
+
+    eye: np.ndarray
+    target: np.ndarray
+    fov_y_deg: float
+
+
+def object_id(stem: str) -> str:
+    """A scene-safe object id from a file stem (characters outside ``[A-Za-z0-9_.-]`` become ``_``)."""
+    oid = re.sub(r"[^A-Za-z0-9_.-]", "_", stem)
+    return "obj_" + oid if oid == "ground" else oid
+
+
+def description_of(stem: str) -> str:
+    """Free text from a file stem: ``wooden_table_000`` -> ``wooden table``."""
+    words = [w for w in re.split(r"[_\s]+", stem) if w]
+    if words and words[-1].isdigit():
+        words = words[:-1]
+    return " ".join(words) or stem
+
+
+def read_mesh(path: Path) -> trimesh.Trimesh:
+    """One mesh file as one mesh (scene graphs flattened), checked for finite vertices and faces."""
+    try:
+        mesh = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types for corrupt files
+        raise InputError(path, None, f"cannot read mesh ({type(exc).__name__}: {str(exc)[:120]})") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise InputError(path, None, "no triangles in the file")
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise InputError(path, None, "vertices contain NaN or inf")
+    return mesh
+
+
+def placement_matrix(entry, where: Path, key: str) -> np.ndarray:
+    """A placement entry (``{"pos", "quat" (w, x, y, z)}`` or a 4x4) as a rigid (4, 4) matrix."""
+    if isinstance(entry, dict):
+        try:
+            T = np.eye(4)
+            T[:3, :3] = quat_wxyz_to_matrix(np.asarray(entry["quat"], dtype=float))
+            T[:3, 3] = np.asarray(entry["pos"], dtype=float)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(where, key, f"expected {{'pos': [3], 'quat': [w, x, y, z]}} ({exc})") from None
+    else:
+        T = np.asarray(entry, dtype=float)
+        if T.shape != (4, 4):
+            raise InputError(where, key, f"expected a 4x4 matrix, got shape {T.shape}")
+    why = rigidity_error(T)
+    if why:
+        raise InputError(where, key, why)
+    return T
+
+
+def read_placed_dir(folder: str | Path, placements: str | Path | dict | None = None) -> list[PlacedObject]:
+    """The objects of a folder of mesh files placed in one frame.
+
+    Parameters
+    ----------
+    folder
+        Holds one mesh file per object (:data:`MESH_SUFFIXES`), the file stem naming the object.
+    placements
+        Optional placement file or mapping (module docstring) applied to each object's vertices.
+
+    Raises
+    ------
+    InputError
+        Missing folder, no mesh files, unreadable meshes, duplicate ids, bad or unknown placements.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(folder, None, "folder not found")
+    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in MESH_SUFFIXES)
+    if not files:
+        raise InputError(folder, None, f"no mesh files ({', '.join(MESH_SUFFIXES)}) in the folder")
+    where = folder
+    if isinstance(placements, (str, Path)):
+        where = Path(placements)
+        try:
+            placements = json.loads(where.read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise InputError(where, None, f"cannot read placements ({exc})") from None
+    placements = placements or {}
+    objects, seen = [], set()
+    for f in files:
+        oid = object_id(f.stem)
+        if oid in seen:
+            raise InputError(f, None, f"object id {oid!r} is used by another file of {folder}")
+        seen.add(oid)
+        mesh = read_mesh(f)
+        if f.stem in placements or oid in placements:
+            key = f.stem if f.stem in placements else oid
+            mesh.apply_transform(placement_matrix(placements[key], where, key))
+        objects.append(PlacedObject(oid, mesh, description_of(f.stem), f))
+    unknown = sorted(set(placements) - {o.source.stem for o in objects} - seen)
+    if unknown:
+        raise InputError(where, None, f"placements for objects without a mesh file: {unknown}")
+    return objects
+
+
+def source_to_z_up(up: str) -> np.ndarray:
+    """Rotation (3, 3) from a source convention (``y`` or ``z`` up) to phiscene's z-up axes."""
+    return np.asarray(Y_UP_TO_Z_UP, dtype=float)[:3, :3] if up == "y" else np.eye(3)
+
+
+@dataclass
+class Levelling:
+    """How a placed scene was levelled.
+
+    Attributes
+    ----------
+    transform : (4, 4) float
+        Source frame -> levelled world frame (rigid).
+    estimate
+        The up estimate (``None`` when levelling was off).
+    """
+
+    transform: np.ndarray
+    estimate: UpEstimate | None
+
+    @property
+    def rotation_deg(self) -> float:
+        """Angle of the levelling rotation after the up-axis convention change (the tilt corrected)."""
+        return 0.0 if self.estimate is None else float(self.estimate.tilt_deg)
+
+
+def level_objects(objects: list[PlacedObject], params: PlacedParams, camera: Camera | None = None) -> Levelling:
+    """The levelling transform of placed objects: convention to z-up, estimated up to +z, lowest point at z = 0."""
+    A = source_to_z_up(params.up)
+    meshes = {o.id: o.mesh.copy().apply_transform(_h(A)) for o in objects}
+    estimate = estimate_up(meshes, [0.0, 0.0, 1.0], params.levelling) if params.level else None
+    up = estimate.up if estimate is not None else np.array([0.0, 0.0, 1.0])
+    forward = None if camera is None else A @ (np.asarray(camera.target, float) - np.asarray(camera.eye, float))
+    points = np.concatenate([m.vertices for m in meshes.values()])
+    T = levelling_transform(points, up, forward) @ _h(A)
+    return Levelling(T, estimate)
+
+
+def _h(R: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = R
+    return T
+
+
+def import_placed(objects: list[PlacedObject], out_dir: str | Path, params: PlacedParams = PlacedParams(),
+                  camera: Camera | None = None, source: dict | None = None,
+                  transform: np.ndarray | None = None) -> Scene:
+    """Write a placed scene, levelled, as ``OUT_DIR/initial/scene.json`` (+ ``reference/camera.json``, ``import.json``).
+
+    Parameters
+    ----------
+    objects
+        The objects, vertices in the source frame.
+    out_dir
+        Output folder.
+    camera
+        The reference camera in the source frame, if known.
+    source
+        Free-form description of the source for ``import.json``.
+    transform : (4, 4) float, optional
+        A given source -> world transform instead of the estimated levelling.
+
+    Returns
+    -------
+    The written scene, loaded back (validated).
+    """
+    from phiscene.bench.render import look_at_camera
+    from phiscene.meshes import save_mesh
+
+    out_dir = Path(out_dir)
+    if transform is None:
+        levelling = level_objects(objects, params, camera)
+    else:
+        levelling = Levelling(np.asarray(transform, dtype=float), None)
+    T = levelling.transform
+    init_dir = out_dir / "initial"
+    scene_objects = []
+    for o in objects:
+        world = o.mesh.copy()
+        world.apply_transform(T)
+        centre = world.bounds.mean(axis=0)
+        local = world.copy()
+        local.apply_translation(-centre)
+        mesh_path = save_mesh(local, init_dir / "meshes" / f"{o.id}.glb")
+        pose = np.eye(4)
+        pose[:3, 3] = centre
+        scene_objects.append(SceneObject(o.id, mesh_path.resolve(), pose, o.description, None,
+                                         {"source_file": o.source.name}))
+    camera_path = None
+    if camera is not None:
+        eye = T[:3, :3] @ np.asarray(camera.eye, dtype=float) + T[:3, 3]
+        target = T[:3, :3] @ np.asarray(camera.target, dtype=float) + T[:3, 3]
+        cam = look_at_camera(eye, target, params.image_width, params.image_height, camera.fov_y_deg, 0.02, 100.0)
+        camera_path = out_dir / "reference" / "camera.json"
+        write_json(camera_path, cam)
+    up_record = levelling.estimate.to_dict() if levelling.estimate is not None else None
+    meta = {"source": source or {}, "levelling": {"rotation_deg": levelling.rotation_deg,
+                                                  "transform": np.round(T, 12).tolist()}}
+    save_scene(Scene(scene_objects, ground_height=0.0, camera=camera_path, meta=meta), init_dir / "scene.json")
+    write_json(out_dir / "import.json", {
+        "format": IMPORT_FORMAT, "source": source or {}, "params": asdict(params),
+        "transform": np.round(T, 12).tolist(), "levelling_rotation_deg": levelling.rotation_deg,
+        "up_estimate": up_record, "objects": {o.id: o.source.name for o in objects}})
+    log.info("%s: %d objects, levelled by %.2f deg", out_dir, len(objects), levelling.rotation_deg)
+    return load_scene(init_dir / "scene.json")
+
+
+def tilt_between(T_a: np.ndarray, T_b: np.ndarray) -> float:
+    """Angle (degrees) between the up directions two levelling transforms (4, 4) assume, in the source frame."""
+    up_a = np.linalg.inv(T_a[:3, :3]) @ [0.0, 0.0, 1.0]
+    up_b = np.linalg.inv(T_b[:3, :3]) @ [0.0, 0.0, 1.0]
+    return angle_deg(up_a, up_b)

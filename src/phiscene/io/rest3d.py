@@ -1,0 +1,151 @@
+"""The REST3D project's page assets: raw SAM 3D Objects scenes and REST3D's stabilised results.
+
+Layout (a ``git clone --branch gh-pages https://github.com/ShirleyMaxx/REST3D``; CC BY-NC 4.0, never committed
+here)::
+
+    ROOT/assets/<scene>/<variant>/meshes/<actor>.glb      one object per file, y-up, metres, scene frame
+    ROOT/assets/<scene>/<variant>/simulation.json         {"actors": [...], "camera": {"position", "target", "fov"},
+                                                           "tracks": {actor: {"pos": [[x, y, z], ...],
+                                                                              "quat": [[w, x, y, z], ...]}}}
+
+``variant`` ``sam3d`` is the raw SAM 3D Objects output (its frame follows the camera: gravity is not levelled);
+``ours`` is REST3D's physically stabilised result on the same meshes, in its own levelled y-up frame. Frame 0
+of each track places the actor: ``world = R(quat) v + pos``.
+
+:func:`import_rest3d` imports one variant through :func:`phiscene.io.placed.import_placed` (``sam3d``: levelled
+by our estimate; ``ours``: y-up convention only, REST3D's own frame). :func:`reference_levelling` is REST3D's
+levelling of a scene as the issue defines it: the Kabsch rotation between the object centres of ``sam3d/`` and
+``ours/`` (itself an estimate: REST3D also moves objects when it places them).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from phiscene.errors import InputError
+from phiscene.io.placed import (
+    Camera,
+    PlacedObject,
+    PlacedParams,
+    description_of,
+    import_placed,
+    object_id,
+    placement_matrix,
+    read_mesh,
+)
+from phiscene.scene import Scene
+
+#: Variants of a REST3D scene folder this module reads.
+VARIANTS = ("sam3d", "ours")
+#: How a user gets the data (printed when it is missing).
+GET_DATA = "git clone --branch gh-pages https://github.com/ShirleyMaxx/REST3D <root>"
+
+
+def scene_dir(root: str | Path, scene: str, variant: str) -> Path:
+    """``ROOT/assets/<scene>/<variant>``; :class:`InputError` naming the missing path and how to get it."""
+    root = Path(root)
+    if not (root / "assets").is_dir():
+        raise InputError(root, None, f"REST3D data not found (no assets/ folder); get it with `{GET_DATA}`")
+    folder = root / "assets" / scene / variant
+    if not (folder / "simulation.json").is_file():
+        raise InputError(folder / "simulation.json", None, f"REST3D scene {scene!r} has no {variant} result")
+    return folder
+
+
+@dataclass
+class Rest3dScene:
+    """One variant of one REST3D scene, in its source frame (y up).
+
+    Attributes
+    ----------
+    objects
+        Objects with their frame-0 placement applied to the vertices.
+    camera
+        The page's camera.
+    """
+
+    objects: list[PlacedObject]
+    camera: Camera | None
+
+
+def read_rest3d(root: str | Path, scene: str, variant: str = "sam3d") -> Rest3dScene:
+    """Read one variant of one REST3D scene (module docstring)."""
+    from phiscene.schemas import read_json
+
+    folder = scene_dir(root, scene, variant)
+    sim_path = folder / "simulation.json"
+    sim = read_json(sim_path)
+    if not isinstance(sim, dict) or not isinstance(sim.get("actors"), list) or not isinstance(sim.get("tracks"), dict):
+        raise InputError(sim_path, None, "expected {'actors': [...], 'tracks': {...}}")
+    objects = []
+    for actor in sim["actors"]:
+        mesh_path = folder / "meshes" / f"{actor}.glb"
+        if not mesh_path.is_file():
+            raise InputError(mesh_path, None, f"mesh of actor {actor!r} not found")
+        track = sim["tracks"].get(actor)
+        if not isinstance(track, dict) or not track.get("pos") or not track.get("quat"):
+            raise InputError(sim_path, f"tracks.{actor}", "needs non-empty 'pos' and 'quat' lists")
+        mesh = read_mesh(mesh_path)
+        entry = {"pos": track["pos"][0], "quat": track["quat"][0]}
+        mesh.apply_transform(placement_matrix(entry, sim_path, f"tracks.{actor}"))
+        objects.append(PlacedObject(object_id(actor), mesh, description_of(actor), mesh_path))
+    camera = None
+    cam = sim.get("camera")
+    if isinstance(cam, dict) and {"position", "target", "fov"} <= set(cam):
+        camera = Camera(np.asarray(cam["position"], float), np.asarray(cam["target"], float), float(cam["fov"]))
+    return Rest3dScene(objects, camera)
+
+
+def import_rest3d(root: str | Path, scene: str, out_dir: str | Path, variant: str = "sam3d",
+                  params: PlacedParams = PlacedParams()) -> Scene:
+    """Import one REST3D scene variant as ``OUT_DIR/initial/scene.json`` (+ ``reference/camera.json``).
+
+    ``sam3d`` is levelled by our estimate (``params.level``); ``ours`` keeps REST3D's frame (y-up only).
+    """
+    data = read_rest3d(root, scene, variant)
+    if variant != "sam3d":
+        params = PlacedParams(**{**params.to_dict(), "level": False})
+    source = {"kind": "rest3d", "root": str(root), "scene": scene, "variant": variant}
+    return import_placed(data.objects, out_dir, params, data.camera, source)
+
+
+def reference_levelling(root: str | Path, scene: str) -> np.ndarray:
+    """REST3D's levelling rotation (3, 3) of a scene, source (``sam3d``) frame -> ``ours`` frame (both y up).
+
+    The Kabsch rotation between the centres (area-weighted surface centroids, which move rigidly with the object)
+    of the objects both variants share.
+    """
+    from scipy.spatial.transform import Rotation
+
+    a = {o.id: surface_centroid(o.mesh) for o in read_rest3d(root, scene, "sam3d").objects}
+    b = {o.id: surface_centroid(o.mesh) for o in read_rest3d(root, scene, "ours").objects}
+    ids = sorted(set(a) & set(b))
+    if len(ids) < 3:
+        raise InputError(Path(root) / "assets" / scene, None, "fewer than 3 objects shared by sam3d/ and ours/")
+    A = np.array([a[i] for i in ids])
+    B = np.array([b[i] for i in ids])
+    rot, _ = Rotation.align_vectors(B - B.mean(axis=0), A - A.mean(axis=0))
+    return rot.as_matrix()
+
+
+def surface_centroid(mesh) -> np.ndarray:
+    """Area-weighted centroid (3,) of a mesh's surface (defined for open meshes; moves rigidly with the mesh)."""
+    w = mesh.area_faces
+    return (mesh.triangles_center * w[:, None]).sum(axis=0) / w.sum()
+
+
+def reference_up(root: str | Path, scene: str) -> np.ndarray:
+    """REST3D's up direction (3,) in the ``sam3d`` source frame (``ours``' +y mapped back)."""
+    return reference_levelling(root, scene).T @ np.array([0.0, 1.0, 0.0])
+
+
+def scene_ids(root: str | Path) -> list[str]:
+    """Scenes of a REST3D checkout that have both a ``sam3d`` and an ``ours`` result."""
+    assets = Path(root) / "assets"
+    if not assets.is_dir():
+        raise InputError(root, None, f"REST3D data not found (no assets/ folder); get it with `{GET_DATA}`")
+    return sorted(p.name for p in assets.iterdir()
+                  if all((p / v / "simulation.json").is_file() for v in VARIANTS))

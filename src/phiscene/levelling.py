@@ -1,0 +1,259 @@
+"""Gravity from geometry: the up direction of a camera-frame scene, and the rigid transform that levels it.
+
+A 3D foundation model places objects in a frame that follows the camera, so gravity is off by the camera's
+pitch and roll (2.5 to 22 degrees on real SAM 3D Objects scenes). Nothing in such a scene is labelled "floor",
+and a table-top photo has no floor at all. What real scenes do offer:
+
+* large upward-facing planar regions: table tops, seats, plates, shelves, the tops of cabinets and dressers.
+  On one object they are a sharp peak in the distribution of area-weighted face normals;
+* the canonical frame of box-like furniture: a 3D generator builds objects upright, so one axis of an object's
+  minimum-volume oriented bounding box is its up axis.
+
+Each object casts one *vote* for the up direction (:func:`object_votes`): the normal of its dominant upward planar
+region when it has one covering at least ``plane_share`` of its area, otherwise its oriented bounding box axis
+nearest the prior, with a smaller weight (``box_weight`` times the box's area scale). Votes are restricted to a
+cone of ``max_tilt_deg`` around the camera's rough up direction (the prior). The estimate
+(:func:`estimate_up`) is the weighted mean of the votes, re-estimated from the votes within ``inlier_deg`` of the
+current estimate until it stops changing: a fruit, a tilted book or a mis-rotated object is outvoted by the table
+top and the furniture. Its spread (weighted RMS angle of the inliers) is reported as a confidence measure.
+
+:func:`levelling_transform` turns the estimate into a rigid transform: the minimal rotation taking up to +z,
+preceded by the up-axis convention of the source (y-up files become z-up), a rotation about z that makes the
+camera's viewing direction +y (x is the camera's right), and a translation that puts the lowest point of the
+scene on the ground plane ``z = 0`` (the feet of the furniture, or of the table in a table-top photo).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+from phiscene.params import Params
+
+#: Up axis conventions of source files -> the rotation that makes them z-up.
+UP_AXES = ("y", "z")
+
+
+@dataclass(frozen=True)
+class LevelParams(Params):
+    """Settings of the up-direction estimate (:func:`estimate_up`).
+
+    Attributes
+    ----------
+    max_tilt_deg
+        Votes farther than this from the prior are ignored (the camera's largest plausible pitch/roll).
+    plane_bandwidth_deg
+        Faces within this angle of a candidate normal count towards its planar region.
+    plane_share
+        An object votes with its dominant plane when the plane covers at least this share of its surface area.
+    box_weight
+        Weight of an oriented-bounding-box vote relative to a plane vote of the same area scale.
+    inlier_deg
+        Votes within this angle of the current estimate are kept when it is re-estimated.
+    candidates
+        Faces sampled (by area) per object as candidate plane normals.
+    seed
+        Seed of that sampling.
+    """
+
+    _label = "levelling parameters"
+
+    max_tilt_deg: float = 40.0
+    plane_bandwidth_deg: float = 4.0
+    plane_share: float = 0.08
+    box_weight: float = 0.25
+    inlier_deg: float = 10.0
+    candidates: int = 1500
+    seed: int = 0
+
+    def check(self) -> None:
+        """Angles in (0, 90) degrees, shares in (0, 1], positive counts (``ValueError``)."""
+        for key in ("max_tilt_deg", "plane_bandwidth_deg", "inlier_deg"):
+            if not 0.0 < getattr(self, key) < 90.0:
+                raise ValueError(f"levelling parameter {key!r} must be in (0, 90) degrees, got {getattr(self, key)}")
+        if not 0.0 < self.plane_share <= 1.0:
+            raise ValueError(f"levelling parameter 'plane_share' must be in (0, 1], got {self.plane_share}")
+        if self.box_weight < 0 or self.candidates < 1:
+            raise ValueError("levelling parameters 'box_weight' must be >= 0 and 'candidates' >= 1")
+
+
+@dataclass(frozen=True)
+class UpEstimate:
+    """The estimated up direction of a scene.
+
+    Attributes
+    ----------
+    up : (3,) float
+        Unit up vector in the source frame.
+    tilt_deg
+        Angle between ``up`` and the prior.
+    spread_deg
+        Weighted RMS angle of the inlier votes from ``up``.
+    votes
+        Per object id: ``{"kind": "plane" | "box", "up": [3], "weight": w, "inlier": bool}``.
+    """
+
+    up: np.ndarray
+    tilt_deg: float
+    spread_deg: float
+    votes: dict
+
+    def to_dict(self) -> dict:
+        """JSON form (``import.json``)."""
+        return {"up": [float(v) for v in self.up], "tilt_deg": float(self.tilt_deg),
+                "spread_deg": float(self.spread_deg), "votes": self.votes}
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    return v / np.linalg.norm(v)
+
+
+def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle (degrees) between two vectors (3,)."""
+    return float(np.degrees(np.arccos(np.clip(_unit(a) @ _unit(b), -1.0, 1.0))))
+
+
+def plane_vote(mesh: trimesh.Trimesh, prior: np.ndarray, params: LevelParams) -> tuple[np.ndarray, float] | None:
+    """The normal of the dominant upward planar region of a mesh and the region's area, if it is one.
+
+    Parameters
+    ----------
+    mesh
+        The object in the source frame.
+    prior : (3,) float
+        Unit prior up direction.
+
+    Returns
+    -------
+    ``(normal (3,), area)``, or ``None`` when no region within ``max_tilt_deg`` of the prior covers
+    ``plane_share`` of the mesh's area.
+    """
+    normals, areas = mesh.face_normals, mesh.area_faces
+    near = normals @ prior > np.cos(np.radians(params.max_tilt_deg))
+    if near.sum() < 3 or areas.sum() <= 0:
+        return None
+    n, a = normals[near], areas[near]
+    rng = np.random.default_rng(params.seed)
+    pick = rng.choice(len(n), size=min(params.candidates, len(n)), replace=False, p=a / a.sum())
+    cos_bw = np.cos(np.radians(params.plane_bandwidth_deg))
+    score = ((n[pick] @ n.T) > cos_bw).astype(float) @ a
+    best = n[pick[int(np.argmax(score))]]
+    for _ in range(5):  # mean shift on the sphere: the mean normal of the faces within the bandwidth
+        w = a * ((n @ best) > cos_bw)
+        best = _unit((n * w[:, None]).sum(axis=0))
+    share = float(a[(n @ best) > cos_bw].sum())
+    if share < params.plane_share * float(areas.sum()):
+        return None
+    return best, share
+
+
+def box_vote(mesh: trimesh.Trimesh, prior: np.ndarray) -> tuple[np.ndarray, float]:
+    """The axis of the minimum-volume oriented bounding box nearest the prior, and the box's area scale.
+
+    Returns
+    -------
+    ``(axis (3,) pointing along the prior, volume ** (2/3))``
+    """
+    box = mesh.bounding_box_oriented.primitive
+    axes = np.asarray(box.transform, dtype=float)[:3, :3]
+    i = int(np.argmax(np.abs(axes.T @ prior)))
+    axis = axes[:, i] * np.sign(axes[:, i] @ prior)
+    return _unit(axis), float(np.prod(box.extents)) ** (2.0 / 3.0)
+
+
+def object_votes(meshes: dict[str, trimesh.Trimesh], prior: np.ndarray, params: LevelParams) -> dict:
+    """One up vote per object (module docstring); objects whose vote is outside the prior's cone cast none."""
+    prior = _unit(prior)
+    votes = {}
+    for oid, mesh in meshes.items():
+        plane = plane_vote(mesh, prior, params)
+        if plane is not None:
+            votes[oid] = {"kind": "plane", "up": plane[0], "weight": plane[1]}
+            continue
+        axis, scale = box_vote(mesh, prior)
+        if angle_deg(axis, prior) <= params.max_tilt_deg and params.box_weight > 0:
+            votes[oid] = {"kind": "box", "up": axis, "weight": params.box_weight * scale}
+    return votes
+
+
+def estimate_up(meshes: dict[str, trimesh.Trimesh], prior, params: LevelParams = LevelParams()) -> UpEstimate:
+    """Up direction of a scene from its objects' votes (module docstring).
+
+    Parameters
+    ----------
+    meshes
+        Object id -> mesh in the source frame.
+    prior : (3,) float
+        The camera's rough up direction in the source frame.
+
+    Returns
+    -------
+    The estimate; the prior itself (spread 0) when no object votes.
+    """
+    prior = _unit(prior)
+    votes = object_votes(meshes, prior, params)
+    if not votes:
+        return UpEstimate(prior, 0.0, 0.0, {})
+    ids = list(votes)
+    V = np.array([votes[i]["up"] for i in ids])
+    W = np.array([votes[i]["weight"] for i in ids])
+    up = _unit((V * W[:, None]).sum(axis=0))
+    cos_in = np.cos(np.radians(params.inlier_deg))
+    for _ in range(20):
+        keep = V @ up >= cos_in
+        if not keep.any():
+            break
+        new = _unit((V[keep] * W[keep, None]).sum(axis=0))
+        if angle_deg(new, up) < 1e-6:
+            break
+        up = new
+    keep = V @ up >= cos_in
+    ang = np.radians([angle_deg(v, up) for v in V])
+    spread = float(np.degrees(np.sqrt((W[keep] * ang[keep] ** 2).sum() / W[keep].sum()))) if keep.any() else 0.0
+    record = {i: {"kind": votes[i]["kind"], "up": [round(float(x), 6) for x in votes[i]["up"]],
+                  "weight": round(float(votes[i]["weight"]), 6), "inlier": bool(k)} for i, k in zip(ids, keep)}
+    return UpEstimate(up, angle_deg(up, prior), spread, record)
+
+
+def rotation_between(a, b) -> np.ndarray:
+    """The minimal rotation (3, 3) taking unit vector ``a`` to unit vector ``b``."""
+    from scipy.spatial.transform import Rotation
+
+    a, b = _unit(a), _unit(b)
+    axis = np.cross(a, b)
+    s, c = np.linalg.norm(axis), float(a @ b)
+    if s < 1e-12:
+        if c > 0:
+            return np.eye(3)
+        perp = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+        return Rotation.from_rotvec(np.pi * _unit(perp)).as_matrix()
+    return Rotation.from_rotvec(axis / s * np.arctan2(s, c)).as_matrix()
+
+
+def levelling_transform(points: np.ndarray, up, forward=None) -> np.ndarray:
+    """The rigid transform (4, 4) that levels a scene: ``up`` -> +z, ``forward`` -> +y, lowest point at z = 0.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+        Every vertex of the scene, source frame (for the ground height).
+    up : (3,) float
+        Unit up direction in the source frame.
+    forward : (3,) float, optional
+        The camera's viewing direction in the source frame; its horizontal part becomes +y (default: keep the
+        minimal rotation's heading).
+    """
+    R = rotation_between(up, [0.0, 0.0, 1.0])
+    if forward is not None:
+        f = R @ np.asarray(forward, dtype=float)
+        if np.hypot(f[0], f[1]) > 1e-9:
+            heading = np.arctan2(f[0], f[1])  # rotate about z so that f's horizontal part points along +y
+            c, s = np.cos(heading), np.sin(heading)
+            R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ R
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[2, 3] = -float((np.asarray(points, dtype=float) @ R.T)[:, 2].min())
+    return T

@@ -1,0 +1,90 @@
+"""Placed-mesh import, the REST3D layout and gravity levelling, on generated scenes with analytic answers."""
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from phiscene.errors import InputError
+from phiscene.io.placed import PlacedParams, level_objects, read_placed_dir
+from phiscene.io.rest3d import import_rest3d, read_rest3d, reference_up, scene_ids
+from phiscene.levelling import LevelParams, angle_deg, estimate_up
+from phiscene.scene import load_scene
+from tests.rest3d_fixture import objects, write_scene
+
+
+def source_up(levelling) -> np.ndarray:
+    """The up direction (source frame) that a levelling transform sends to +z."""
+    return levelling.transform[:3, :3].T @ np.array([0.0, 0.0, 1.0])
+
+
+@pytest.mark.parametrize("tilt", [(12.0, 4.0), (-20.0, 2.0), (3.0, -6.0), (0.0, 0.0)])
+@pytest.mark.parametrize("poster", [True, False])
+def test_tilted_scene_is_levelled_within_one_degree(tmp_path, tilt, poster):
+    R = write_scene(tmp_path, "s", tilt, with_poster=poster)
+    data = read_rest3d(tmp_path, "s", "sam3d")
+    lev = level_objects(data.objects, PlacedParams(), data.camera)
+    truth = R @ np.array([0.0, 1.0, 0.0])
+    assert angle_deg(source_up(lev), truth) < 1.0
+    assert lev.rotation_deg == pytest.approx(angle_deg(truth, [0.0, 1.0, 0.0]), abs=1.0)
+
+
+def test_table_top_only_scene_without_floor(tmp_path):
+    """A close-up: only things on a table top, no table legs, no floor: the plate and box tops still vote."""
+    R = Rotation.from_euler("xz", [15.0, -3.0], degrees=True).as_matrix()
+    folder = tmp_path / "meshes"
+    folder.mkdir()
+    for name, mesh in objects(with_poster=False).items():
+        if name == "wooden_table_000":
+            mesh = trimesh.creation.box([1.2, 0.04, 0.8], transform=trimesh.transformations.translation_matrix(
+                [0, 0.73, 0]))
+        mesh.vertices = mesh.vertices @ R.T
+        mesh.export(folder / f"{name}.glb")
+    lev = level_objects(read_placed_dir(folder), PlacedParams())
+    assert angle_deg(source_up(lev), R @ [0.0, 1.0, 0.0]) < 1.0
+
+
+def test_import_reproduces_placements_and_levels(tmp_path):
+    R = write_scene(tmp_path, "s", (10.0, 5.0))
+    scene = import_rest3d(tmp_path, "s", tmp_path / "out", "sam3d")
+    levelled = {n: m for n, m in objects().items()}
+    # the table's feet on the ground, its top horizontal at its height above the feet (0.75 m)
+    table = scene.get("wooden_table_000").world_mesh()
+    assert table.bounds[0, 2] == pytest.approx(0.0, abs=2e-3)
+    top = table.vertices[:, 2].max()
+    assert top == pytest.approx(0.75, abs=5e-3)
+    # every object keeps its shape and its place relative to the table (rigid transform of the fixture)
+    for oid, mesh in levelled.items():
+        w = scene.get(oid).world_mesh()
+        assert w.extents[2] == pytest.approx(mesh.extents[1], abs=5e-3)  # y-up height -> z-up height
+        rel = w.bounds.mean(axis=0)[2] - table.bounds[0, 2]
+        assert rel == pytest.approx(mesh.bounds.mean(axis=0)[1], abs=5e-3)
+    info = json.loads((tmp_path / "out" / "import.json").read_text())
+    assert info["levelling_rotation_deg"] == pytest.approx(angle_deg(R @ [0, 1, 0], [0, 1, 0]), abs=1.0)
+    cam = json.loads((tmp_path / "out" / "reference" / "camera.json").read_text())
+    # camera eye was 1.8 m above the feet in the levelled fixture
+    assert cam["eye"][2] == pytest.approx(1.8, abs=0.02)
+    assert load_scene(tmp_path / "out" / "initial" / "scene.json").ids == scene.ids
+
+
+def test_reference_levelling_is_the_kabsch_rotation(tmp_path):
+    R = write_scene(tmp_path, "s", (14.0, 0.0), variant="sam3d")
+    write_scene(tmp_path, "s", (0.0, 0.0), variant="ours")
+    assert angle_deg(reference_up(tmp_path, "s"), R @ [0, 1, 0]) < 1e-6
+    assert scene_ids(tmp_path) == ["s"]
+
+
+def test_missing_data_names_the_path(tmp_path):
+    with pytest.raises(InputError, match="REST3D data not found.*git clone --branch gh-pages"):
+        read_rest3d(tmp_path / "nowhere", "custom_viga")
+    write_scene(tmp_path, "s")
+    with pytest.raises(InputError, match="has no ours result"):
+        read_rest3d(tmp_path, "s", "ours")
+
+
+def test_no_votes_keeps_the_prior():
+    sphere = trimesh.creation.icosphere(3, 0.1)
+    est = estimate_up({"ball": sphere}, [0, 0, 1], LevelParams(box_weight=0.0))
+    assert est.tilt_deg == 0.0 and est.votes == {}
