@@ -252,7 +252,8 @@ def test_every_section_refers_to_its_class():
         assert by_kind[kind]["properties"]["params"]["$ref"] == f"#/$defs/{load_class(spec).__name__}", kind
     suite = props["suites"]["additionalProperties"]["properties"]
     assert suite["benchmark"]["$ref"] == f"#/$defs/{load_class(SECTIONS['benchmark']).__name__}"
-    assert suite["source"]["$ref"] == f"#/$defs/{load_class(SOURCE_PARAMS['front3d']).__name__}"
+    assert [alt["$ref"] for alt in suite["source"]["oneOf"]] == \
+        [f"#/$defs/{load_class(spec).__name__}" for spec in SOURCE_PARAMS.values()]
 
 
 def test_default_config_passes_schema_and_classes():

@@ -52,6 +52,7 @@ SECTIONS: dict[str, str] = {
     "metrics.recon": "phiscene.metrics.reconstruction:ReconParams",
     "metrics.alignment": "phiscene.metrics.alignment:AlignmentParams",
     "metrics.mujoco": "phiscene.sim.mujoco:MujocoParams",
+    "metrics.pose": "phiscene.metrics.pose:PoseParams",
     "export.demo": "phiscene.demo:DemoParams",
 }
 
@@ -67,6 +68,7 @@ BASELINE_PARAMS: dict[str, str] = {
 #: Real-data source kind -> parameter class of ``suites.<suite>.source``.
 SOURCE_PARAMS: dict[str, str] = {
     "front3d": "phiscene.io.front3d:Front3dParams",
+    "rest3d": "phiscene.io.rest3d:Rest3dSource",
 }
 
 

@@ -126,7 +126,7 @@ def run_metrics(tasks: list[dict], settings: dict, proxies_path: str | Path | No
     ----------
     tasks
         Per method: ``method``, ``scene`` (its ``scene.json``), ``out`` (the metrics JSON to write),
-        ``sections`` and optionally ``proxies`` (its own).
+        ``sections`` and optionally ``proxies`` (its own) and ``align`` (its scenes are in their own frame).
     settings
         Parameter mappings by name (``physical``, ``sim``, ``mujoco``, ``alignment``, ``recon``).
     proxies_path, gt_path, initial_path, reference_dir, cache_dir
@@ -143,5 +143,6 @@ def run_metrics(tasks: list[dict], settings: dict, proxies_path: str | Path | No
 
     inputs = MetricInputs(proxies=proxies_path, gt=gt_path, initial=initial_path, reference_dir=reference_dir,
                           cache_dir=cache_dir)
-    todo = [MetricTask(t["method"], t["scene"], t["out"], tuple(t["sections"]), t.get("proxies")) for t in tasks]
+    todo = [MetricTask(t["method"], t["scene"], t["out"], tuple(t["sections"]), t.get("proxies"), t.get("align", False))
+            for t in tasks]
     return methods_metrics(todo, inputs, settings, name)

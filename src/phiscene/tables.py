@@ -38,6 +38,15 @@ CROSSSIM_COLUMNS = {"drift_trans_mujoco": "min", "drift_rot_mujoco": "min"}
 RECON_COLUMNS = {"scene_cd": "min", "scene_fscore": "max", "object_cd": "min", "object_fscore": "max",
                  "bbox_iou": "max"}
 RECON_EXTRA = ["scene_cd_icp", "scene_fscore_icp", "bbox_iou_raw"]
+#: Real-scene table: physical metrics in both simulators and faithfulness to the (levelled) input, ranked.
+REAL_COLUMNS = {"pen_depth": "min", "float_dist": "min", "drift_trans": "min", "drift_rot": "min",
+                "drift_trans_mujoco": "min", "drift_rot_mujoco": "min", "displacement_mean": "min",
+                "displacement_max": "min", "rotation_mean": "min", "rotation_max": "min"}
+#: Its unranked columns: attached objects, settled fraction and seconds per scene (grounding methods only).
+REAL_EXTRA = ["attached", "settled_frac", "seconds"]
+#: Footnote of tables whose drift leaves attached objects out.
+ATTACHED_NOTE = ("Objects attached to a wall, the ceiling or the ground (``attached``) are static: they are "
+                 "colliders for the others and are left out of the drift, floating and displacement averages.")
 #: Ablation table (paper Tab. 6): reference alignment (mask IoU in place of CLIP-I) + the physical metrics.
 ABLATION_COLUMNS = {"mask_iou": "max", **PHYS_COLUMNS}
 
@@ -141,6 +150,63 @@ def ablation_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
                                                                       failed=failed))
     df = df[[*ABLATION_COLUMNS, "pose_change_trans", "pose_change_rot", "n_scenes", "n_failed"]]
     df["avg_rank"] = average_rank(df, ABLATION_COLUMNS)
+    return df
+
+
+def _assembly_summary(path: str | Path | None) -> dict:
+    """Settled fraction and seconds of one grounding from its assembly log (NaN without one)."""
+    nan = float("nan")
+    if path is None:
+        return {"settled_frac": nan, "seconds": nan}
+    data = _read(path)
+    if is_failure_record(data) or "summary" not in data:
+        return {"settled_frac": nan, "seconds": nan}
+    s = data["summary"]
+    free = [r for r in data.get("objects", {}).values() if r.get("settle_remedy") != "attached"]
+    settled = sum(r.get("settled") is True for r in free)
+    return {"settled_frac": settled / len(free) if free else nan, "seconds": float(s.get("seconds", nan))}
+
+
+def real_scene_rows(files: dict[str, list[str | Path]], scenes: list[str],
+                    logs: dict[str, list[str | Path]] | None = None) -> pd.DataFrame:
+    """Per (method, scene): the real-scene table's columns (failed scenes as NaN with ``failed`` = 1).
+
+    Parameters
+    ----------
+    files
+        Method -> per-scene metrics files (``physical``, ``mujoco`` and ``pose`` sections), in ``scenes`` order.
+    scenes
+        Scene ids.
+    logs
+        Method -> per-scene assembly logs (``settled_frac``, ``seconds``); methods without them get NaN.
+    """
+    rows = []
+    for method, paths in files.items():
+        for i, (scene, path) in enumerate(zip(scenes, paths)):
+            data = _read(path)
+            row = {"method": method, "scene": scene, "failed": int(is_failure_record(data))}
+            if not row["failed"]:
+                phys, mj, pose = (_values(path, s) for s in ("physical", "mujoco", "pose"))
+                row.update({k: phys[k] for k in ("pen_depth", "float_dist", "drift_trans", "drift_rot")})
+                row.update(drift_trans_mujoco=mj["drift_trans"], drift_rot_mujoco=mj["drift_rot"])
+                row.update({k: pose[k] for k in ("displacement_mean", "displacement_max", "rotation_mean",
+                                                  "rotation_max", "attached")})
+            log_path = (logs or {}).get(method, [None] * len(paths))[i]
+            row.update(_assembly_summary(log_path))
+            rows.append(row)
+    return pd.DataFrame(rows).set_index(["method", "scene"])
+
+
+def real_table(files: dict[str, list[str | Path]], scenes: list[str],
+               logs: dict[str, list[str | Path]] | None = None) -> pd.DataFrame:
+    """Real scenes: per method the mean over its successful scenes of :func:`real_scene_rows`' columns."""
+    per = real_scene_rows(files, scenes, logs)
+    ok = per[per["failed"] == 0]
+    cols = [*REAL_COLUMNS, *REAL_EXTRA]
+    df = ok.groupby(level="method", sort=False)[cols].mean().reindex(list(files))
+    df["n_scenes"] = per.groupby(level="method", sort=False).size().reindex(list(files))
+    df["n_failed"] = per.groupby(level="method", sort=False)["failed"].sum().reindex(list(files))
+    df["avg_rank"] = average_rank(df, REAL_COLUMNS)
     return df
 
 

@@ -39,7 +39,7 @@ rule front3d_scene:
         image="results/scenes/{suite}/{scene}/reference/image.png",
         segmentation="results/scenes/{suite}/{scene}/reference/segmentation.png",
     wildcard_constraints:
-        suite=alternation(source_suites()),
+        suite=alternation(source_suites("front3d")),
     params:
         source=suite_source,
         version=V.BENCHMARK,
@@ -55,3 +55,30 @@ rule front3d_scene:
         ENV
     script:
         "../scripts/front3d_scene.py"
+
+
+rule rest3d_scene:
+    # a suite with `source: {kind: rest3d, root: ...}`: one scene of the REST3D page assets, levelled (phiscene.io.rest3d)
+    input:
+        unpack(rest3d_inputs),
+    output:
+        initial="results/scenes/{suite}/{scene}/initial/scene.json",
+        camera="results/scenes/{suite}/{scene}/reference/camera.json",
+        record="results/scenes/{suite}/{scene}/import.json",
+    wildcard_constraints:
+        suite=alternation(source_suites("rest3d")),
+    params:
+        source=suite_source,
+        version=V.BENCHMARK,
+    log:
+        "results/logs/benchmark/{suite}/{scene}.log",
+    benchmark:
+        "results/benchmarks/benchmark/{suite}/{scene}.tsv"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=30,
+    conda:
+        ENV
+    script:
+        "../scripts/rest3d_scene.py"

@@ -13,6 +13,10 @@ def scene_ids(suite):
     s = config["suites"][suite]
     if "scenes" in s:
         return list(s["scenes"])
+    if "source" in s and s["source"]["kind"] == "rest3d":  # every scene of the REST3D checkout
+        from phiscene.io.rest3d import scene_ids as _rest3d_scene_ids
+
+        return _rest3d_scene_ids(s["source"]["root"])
     if "source" in s:  # 3D-FRONT test rooms (phiscene.io.front3d), from the source's room list file
         from phiscene.io.front3d import scene_ids as _front3d_scene_ids
 
@@ -31,9 +35,16 @@ def benchmark_suites():
     return [s for s in config["suites"] if "source" not in config["suites"][s]]
 
 
-def source_suites():
-    """Suites read from a real-data `source` (3D-FRONT)."""
-    return [s for s in config["suites"] if "source" in config["suites"][s]]
+def source_suites(kind):
+    """Suites read from a real-data `source` of one kind (front3d: 3D-FRONT; rest3d: REST3D page assets)."""
+    return [s for s, spec in config["suites"].items() if spec.get("source", {}).get("kind") == kind]
+
+
+def rest3d_inputs(wildcards):
+    """The REST3D files one scene's import reads: a missing checkout fails the DAG naming the missing path."""
+    source = config["suites"][wildcards.suite]["source"]
+    folder = os.path.join(source["root"], "assets", wildcards.scene, source.get("variant", "sam3d"))
+    return {"simulation": os.path.join(folder, "simulation.json")}
 
 
 def benchmark_settings(wildcards):
@@ -160,6 +171,7 @@ def metric_tasks(suite, methods):
             "method": m,
             "sections": metric_sections(m, suite),
             "own_proxies": config["methods"][m]["kind"] in OWN_MESH_KINDS,
+            "align": config["methods"][m].get("frame", "shared") == "own",
         }
         for m in methods
     ]
@@ -236,3 +248,39 @@ wildcard_constraints:
     suite=alternation(list(config["suites"])),
     scene="[A-Za-z0-9_]+",
     backend="[a-z_]+",
+
+
+def suite_available(suite):
+    """Whether a suite's data are here: real-data suites need their local copy (`source.root`)."""
+    source = config["suites"][suite].get("source")
+    return source is None or os.path.isdir(os.path.join(source["root"], "assets" if source["kind"] == "rest3d" else ""))
+
+
+def real_table_scenes(wildcards=None):
+    """Scene ids of the real table's suite."""
+    return scene_ids(config["tables"]["real"]["suite"])
+
+
+def real_table_inputs(wildcards):
+    """Metrics files of every method of the real table, plus the assembly logs of its grounding methods."""
+    if "real" not in config["tables"]:
+        raise ValueError("config: tables.real is not configured (suite and methods of the real-scene table)")
+    inputs = table_inputs("real")
+    suite = config["tables"]["real"]["suite"]
+    for m in config["tables"]["real"]["methods"]:
+        if config["methods"][m]["kind"] == "phi_scene":
+            inputs[f"log_{m}"] = expand(f"results/methods/{m}/{suite}/{{scene}}/assembly.json", scene=scene_ids(suite))
+    return inputs
+
+
+def optional_tables():
+    """Tables of `rule all` beyond the default ones: the real table when its suite's data are here (else a note)."""
+    if "real" not in config["tables"]:
+        return []
+    suite = config["tables"]["real"]["suite"]
+    if suite_available(suite):
+        return ["results/tables/real.csv"]
+    root = config["suites"][suite]["source"]["root"]
+    print(f"note: results/tables/real.csv skipped: the {suite} suite's data are not at {root} "
+          "(README, 'Real scenes', says how to get them)", file=sys.stderr)
+    return []

@@ -12,7 +12,7 @@ if REPORT_METHOD not in config["methods"]:
 
 def report_suites():
     """Suites of the tables: every scene of these gets a picture and a 3D viewer in the report."""
-    return sorted({spec["suite"] for spec in config["tables"].values() if "suite" in spec})
+    return sorted({spec["suite"] for spec in config["tables"].values() if "suite" in spec and suite_available(spec["suite"])})
 
 
 def report_topology(wildcards):

@@ -126,3 +126,27 @@ rule ablation_table:
         ENV
     script:
         "../scripts/ablation_table.py"
+
+
+rule real_table:
+    # the real suite (config tables.real): rows initial, the imported peer result(s), every grounding variant
+    input:
+        unpack(real_table_inputs),
+    output:
+        csv="results/tables/real.csv",
+        md="results/tables/real.md",
+        scenes="results/tables/real_scenes.csv",
+    params:
+        methods=config["tables"].get("real", {}).get("methods", []),
+        scenes=real_table_scenes,
+        version=V.TABLES,
+    log:
+        "results/logs/tables/real.log",
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
+    conda:
+        ENV
+    script:
+        "../scripts/real_table.py"

@@ -10,7 +10,7 @@ inp = sm.input
 name = f"metrics {sm.wildcards.scene}"
 with job(name, sm.log[0], sm.threads, failure_outputs=sm.output):
     tasks = [{"method": t["method"], "scene": inp[f"scene_{t['method']}"], "out": out, "sections": t["sections"],
-              "proxies": inp[f"proxies_{t['method']}"] if t["own_proxies"] else None}
+              "proxies": inp[f"proxies_{t['method']}"] if t["own_proxies"] else None, "align": t["align"]}
              for t, out in zip(sm.params.tasks, sm.output)]
     run_metrics(tasks, dict(sm.params.settings), proxies_path=inp.get("proxies"), gt_path=inp.get("gt"),
                 initial_path=inp.get("initial"),

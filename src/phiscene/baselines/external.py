@@ -21,7 +21,11 @@ A prediction is one folder (or one GLB file) per scene, in one of three layouts:
     times a uniform scale (shear, non-uniform scale) is baked into the
     geometry instead, with the identity pose.
 
-``layout="auto"`` picks ``poses`` when ``poses.json`` exists, else
+``rest3d``
+    A REST3D result folder (``meshes/*.glb`` + ``simulation.json``, :mod:`phiscene.io.rest3d`): object meshes
+    placed by frame 0 of the simulation, REST3D's y-up frame made z-up (its own levelling kept).
+
+``layout="auto"`` picks ``poses`` when ``poses.json`` exists, else ``rest3d`` when ``simulation.json`` and ``meshes/`` do, else
 ``meshes`` when a mesh file is named after an object id, else ``scene``
 when the folder holds exactly one ``.glb``/``.gltf`` file (or the path is
 such a file).
@@ -65,7 +69,7 @@ SCENE_SUFFIXES = (".glb", ".gltf")
 #: File name of layout ``poses``.
 POSES_FILE = "poses.json"
 #: Layouts :func:`import_external` understands.
-LAYOUTS = ("auto", "meshes", "poses", "scene")
+LAYOUTS = ("auto", "meshes", "poses", "scene", "rest3d")
 
 
 @dataclass(frozen=True)
@@ -98,6 +102,34 @@ class ImportParams(Params):
                              f"{self.extra!r}")
 
 
+def read_rest3d_objects(folder: Path, ids: list[str]) -> tuple[dict[str, tuple], list[str]]:
+    """Objects of a REST3D result folder (:mod:`phiscene.io.rest3d`) in REST3D's own frame, made z-up.
+
+    Returns
+    -------
+    objects
+        id -> (local mesh centred on its bounding box, pose (4, 4)) for the ids of the initial scene.
+    extra
+        Ids in the folder that the initial scene lacks.
+    """
+    from phiscene.io.rest3d import read_rest3d_dir
+    from phiscene.transforms import Y_UP_TO_Z_UP
+
+    out, extra = {}, []
+    for obj in read_rest3d_dir(folder).objects:
+        if obj.id not in set(ids):
+            extra.append(obj.id)
+            continue
+        world = obj.mesh.copy()
+        world.apply_transform(np.asarray(Y_UP_TO_Z_UP))
+        centre = world.bounds.mean(axis=0)
+        world.apply_translation(-centre)
+        pose = np.eye(4)
+        pose[:3, 3] = centre
+        out[obj.id] = (world, pose)
+    return out, extra
+
+
 # -- layout detection ------------------------------------------------------------------------------------------------
 def _mesh_files(folder: Path) -> list[Path]:
     return sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
@@ -119,6 +151,8 @@ def detect_layout(pred: Path, ids: list[str]) -> str:
         raise InputError(pred, None, "prediction folder not found")
     if (pred / POSES_FILE).is_file():
         return "poses"
+    if (pred / "simulation.json").is_file() and (pred / "meshes").is_dir():
+        return "rest3d"
     if any(p.stem in set(ids) for p in _mesh_files(pred)):
         return "meshes"
     scenes = sorted(p for p in pred.iterdir() if p.is_file() and p.suffix.lower() in SCENE_SUFFIXES)
@@ -319,6 +353,11 @@ def import_external(pred_dir: str | Path, initial_scene: Scene | str | Path, out
         for oid in ids:
             if oid in poses:
                 found[oid] = (initial.get(oid).mesh_path, poses[oid])
+    elif layout == "rest3d":
+        source = pred / "simulation.json"
+        objects, extra = read_rest3d_objects(pred, ids)
+        for oid, (mesh, pose) in objects.items():
+            found[oid] = (mesh, pose)
     elif layout == "scene":
         source = _scene_file(pred)
         objects, extra = read_scene_file(source, ids)
@@ -347,7 +386,7 @@ def import_external(pred_dir: str | Path, initial_scene: Scene | str | Path, out
         mesh, pose = found[o.id]
         if layout == "meshes":
             mesh_path = _copy_file(mesh, mesh_dir / f"{o.id}{mesh.suffix.lower()}")
-        elif layout == "scene":
+        elif layout in ("scene", "rest3d"):
             mesh_path = save_mesh(mesh, mesh_dir / f"{o.id}.glb")
         else:
             mesh_path = mesh

@@ -20,7 +20,7 @@ levelling of a scene as the issue defines it: the Kabsch rotation between the ob
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -36,12 +36,44 @@ from phiscene.io.placed import (
     placement_matrix,
     read_mesh,
 )
+from phiscene.params import Params
 from phiscene.scene import Scene
 
 #: Variants of a REST3D scene folder this module reads.
 VARIANTS = ("sam3d", "ours")
 #: How a user gets the data (printed when it is missing).
 GET_DATA = "git clone --branch gh-pages https://github.com/ShirleyMaxx/REST3D <root>"
+
+
+@dataclass(frozen=True)
+class Rest3dSource(Params):
+    """A REST3D source (``config.yaml`` ``suites.<suite>.source`` with ``kind: rest3d``).
+
+    Attributes
+    ----------
+    root
+        The REST3D checkout (``git clone --branch gh-pages ...``), relative to the working directory.
+    kind
+        ``rest3d``.
+    variant
+        Which result is the suite's initial scene: ``sam3d`` (raw SAM 3D Objects, levelled here) or ``ours``.
+    placed
+        Import settings (:class:`phiscene.io.placed.PlacedParams`: up convention, levelling, image size).
+    """
+
+    _label = "REST3D source"
+
+    root: str
+    kind: str = "rest3d"
+    variant: str = "sam3d"
+    placed: PlacedParams = field(default_factory=PlacedParams)
+
+    def check(self) -> None:
+        """Reject another kind or an unknown variant (``ValueError``)."""
+        if self.kind != "rest3d":
+            raise ValueError(f"REST3D source kind must be 'rest3d', got {self.kind!r}")
+        if self.variant not in VARIANTS:
+            raise ValueError(f"REST3D variant must be one of {VARIANTS}, got {self.variant!r}")
 
 
 def scene_dir(root: str | Path, scene: str, variant: str) -> Path:
@@ -73,10 +105,17 @@ class Rest3dScene:
 
 def read_rest3d(root: str | Path, scene: str, variant: str = "sam3d") -> Rest3dScene:
     """Read one variant of one REST3D scene (module docstring)."""
+    return read_rest3d_dir(scene_dir(root, scene, variant))
+
+
+def read_rest3d_dir(folder: str | Path) -> Rest3dScene:
+    """Read one REST3D result folder (``meshes/*.glb`` + ``simulation.json``), frame-0 placements applied."""
     from phiscene.schemas import read_json
 
-    folder = scene_dir(root, scene, variant)
+    folder = Path(folder)
     sim_path = folder / "simulation.json"
+    if not sim_path.is_file():
+        raise InputError(sim_path, None, "REST3D simulation.json not found")
     sim = read_json(sim_path)
     if not isinstance(sim, dict) or not isinstance(sim.get("actors"), list) or not isinstance(sim.get("tracks"), dict):
         raise InputError(sim_path, None, "expected {'actors': [...], 'tracks': {...}}")
@@ -140,6 +179,12 @@ def surface_centroid(mesh) -> np.ndarray:
 def reference_up(root: str | Path, scene: str) -> np.ndarray:
     """REST3D's up direction (3,) in the ``sam3d`` source frame (``ours``' +y mapped back)."""
     return reference_levelling(root, scene).T @ np.array([0.0, 1.0, 0.0])
+
+
+def run_rest3d_scene(source: dict, scene: str, out_dir: str | Path) -> Scene:
+    """Workflow stage: one scene of a ``rest3d`` source as ``OUT_DIR/initial/scene.json`` (+ ``reference/``)."""
+    src = Rest3dSource.from_dict(source)
+    return import_rest3d(src.root, scene, out_dir, src.variant, src.placed)
 
 
 def scene_ids(root: str | Path) -> list[str]:

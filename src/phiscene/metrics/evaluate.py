@@ -13,7 +13,13 @@ section        metrics                                                  needs
 ``mujoco``     MuJoCo drift (cross-simulator check)                     proxies, ``sim``
 ``alignment``  mask IoU against the reference segmentation, pose change initial scene, reference dir
 ``recon``      reconstruction against ground truth (MIDI-3D protocol)   ground-truth scene
+``pose``       displacement / rotation change from the input            initial scene
+``pose_gt``    the same, plus pose error (translation, rotation,        initial and ground-truth
+               ADD-S) against ground truth                              scenes
 =============  ======================================================  ==========================
+
+A method whose scenes live in another frame (config ``frame: own``, e.g. an imported peer's result in its own
+levelled frame) is compared after the best rigid alignment of its object centres (``MetricTask.align``).
 
 The workflow computes the files of every method of a scene in one job
 (:func:`methods_metrics`): importing the simulators and mesh libraries costs a
@@ -37,16 +43,16 @@ log = logging.getLogger(__name__)
 
 FORMAT = "phiscene.metrics/1"
 #: Sections of a metrics file, in the order they are computed.
-SECTIONS = ("physical", "mujoco", "alignment", "recon")
+SECTIONS = ("physical", "mujoco", "alignment", "recon", "pose", "pose_gt")
 #: Settings each section reads (keys of the ``settings`` mapping of :func:`scene_metrics`).
 SECTION_SETTINGS = {"physical": ("physical", "sim"), "mujoco": ("physical", "sim", "mujoco"),
-                    "alignment": ("alignment",), "recon": ("recon",)}
+                    "alignment": ("alignment",), "recon": ("recon",), "pose": ("pose",), "pose_gt": ("pose",)}
 #: Input files each section reads (fields of :class:`MetricInputs`).
 SECTION_INPUTS = {"physical": ("proxies", "cache_dir"), "mujoco": ("proxies",), "alignment": ("initial", "reference_dir"),
-                  "recon": ("gt",)}
+                  "recon": ("gt",), "pose": ("initial",), "pose_gt": ("initial", "gt")}
 #: Sections each paper table (:mod:`phiscene.tables`) reads from the metrics files of the methods it shows.
 TABLE_SECTIONS = {"phys": ("physical",), "crosssim": ("physical", "mujoco"), "ablation": ("physical", "alignment"),
-                  "recon": ("recon",)}
+                  "recon": ("recon",), "real": ("physical", "mujoco", "pose")}
 
 
 @dataclass(frozen=True)
@@ -65,6 +71,8 @@ class MetricTask:
         Its sections (:data:`SECTIONS`).
     proxies
         The method's own proxies (methods that bring their own meshes); ``None`` = the scene's shared ones.
+    align
+        The method's scenes are in their own frame: pose metrics align its object centres first.
     """
 
     method: str
@@ -72,6 +80,7 @@ class MetricTask:
     out: str | Path
     sections: tuple[str, ...]
     proxies: str | Path | None = None
+    align: bool = False
 
 
 @dataclass(frozen=True)
@@ -115,7 +124,7 @@ def required_inputs(sections: list[str] | tuple[str, ...]) -> list[str]:
 
 
 def scene_metrics(scene_path: str | Path, sections: list[str] | tuple[str, ...], inputs: MetricInputs,
-                  settings: dict) -> dict:
+                  settings: dict, align: bool = False) -> dict:
     """Compute the requested metric sections of one scene.
 
     Parameters
@@ -129,6 +138,8 @@ def scene_metrics(scene_path: str | Path, sections: list[str] | tuple[str, ...],
     settings
         Per settings name (``physical``, ``sim``, ``mujoco``, ``alignment``, ``recon``) the mapping for
         that parameter dataclass' ``from_dict``; a missing one takes the defaults.
+    align
+        Pose sections compare after the best rigid alignment of the object centres (a method in its own frame).
 
     Returns
     -------
@@ -183,6 +194,17 @@ def scene_metrics(scene_path: str | Path, sections: list[str] | tuple[str, ...],
                                                   ReconParams.from_dict(settings.get("recon", {})))
         log.info("recon: scene CD %.4f, F %.3f, object CD %.4f, F %.3f, bbox IoU %.3f", r["scene_cd"],
                  r["scene_fscore"], r["object_cd"], r["object_fscore"], r["bbox_iou"])
+    if "pose" in order or "pose_gt" in order:
+        from phiscene.metrics.pose import PoseParams, pose_metrics
+
+        pp = PoseParams.from_dict(settings.get("pose", {}))
+        initial = load_scene(inputs.initial)
+        for sec in [s for s in ("pose", "pose_gt") if s in order]:
+            gt = load_scene(inputs.gt) if sec == "pose_gt" else None
+            r = out[sec] = {**pose_metrics(scene, initial, gt, align, pp.samples, pp.seed),
+                            "attached": len(scene.attached_ids)}
+            log.info("%s: displacement %.4f m (max %.4f), rotation change %.2f deg (max %.2f)", sec,
+                     r["displacement_mean"], r["displacement_max"], r["rotation_mean"], r["rotation_max"])
     return out
 
 
@@ -249,7 +271,7 @@ def methods_metrics(tasks: list[MetricTask], inputs: MetricInputs, settings: dic
         job = f"{name} {task.method}"
         own = replace(inputs, proxies=task.proxies) if task.proxies is not None else inputs
         try:
-            result = scene_metrics(task.scene, task.sections, own, settings)
+            result = scene_metrics(task.scene, task.sections, own, settings, task.align)
         except PhisceneError as exc:
             if not exc.per_scene:
                 raise
