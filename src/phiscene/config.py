@@ -229,6 +229,9 @@ def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -
 
     for suite, spec in _mapping(config.get("suites"), "suites").items():
         spec = _mapping(spec, f"suites.{suite}")
+        if "proxies" in spec:
+            check_params(load_class(SECTIONS["proxies"]), deep_merge(config.get("proxies") or {}, spec["proxies"]),
+                         f"suites.{suite}.proxies")
         if "source" in spec:
             source = _mapping(spec["source"], f"suites.{suite}.source")
             kind = source.get("kind")

@@ -30,7 +30,9 @@ from phiscene.params import Params
 log = logging.getLogger(__name__)
 
 #: Bump when the decomposition code changes in a way that changes results.
-PROXY_VERSION = 1
+PROXY_VERSION = 2
+#: Routes a decomposition can take (recorded in ``Proxy.meta["route"]``).
+ROUTES = ("convex", "single_hull", "decomposed")
 
 
 @dataclass(frozen=True)
@@ -55,6 +57,14 @@ class ProxyParams(Params):
         CoACD tree-search settings.
     seed
         Random seed of the decomposition.
+    max_faces
+        Meshes with more faces are decimated (quadric, ``fast_simplification``) to this budget before
+        decomposition; the fidelity check still measures the proxies against the original mesh. Real
+        foundation-model meshes have ~30,000 faces, and CoACD's cost grows with them (0 = never decimate).
+    convex_tolerance
+        A mesh whose convex hull stays within this fraction of its bounding-box diagonal of its surface (95th
+        percentile over hull surface samples) is nearly convex and gets its convex hull as its only proxy,
+        without CoACD (fruit, plates, boxes, jugs). 0 = always decompose.
     """
 
     _label = "proxy parameters"
@@ -69,11 +79,17 @@ class ProxyParams(Params):
     mcts_nodes: int = 12
     mcts_max_depth: int = 2
     seed: int = 0
+    max_faces: int = 2000
+    convex_tolerance: float = 0.03
 
     def check(self) -> None:
-        """Reject an unknown ``backend`` (``ValueError``)."""
+        """Reject an unknown ``backend`` or negative budgets (``ValueError``)."""
         if self.backend not in ("coacd", "vhacd", "convex"):
             raise ValueError(f"proxy backend must be coacd, vhacd or convex, got {self.backend!r}")
+        if self.max_faces < 0 or self.max_faces in range(1, 100):
+            raise ValueError(f"proxy max_faces must be 0 (no decimation) or >= 100, got {self.max_faces}")
+        if not 0.0 <= self.convex_tolerance < 1.0:
+            raise ValueError(f"proxy convex_tolerance must be in [0, 1), got {self.convex_tolerance}")
 
     def digest(self) -> str:
         text = json.dumps({**asdict(self), "version": PROXY_VERSION}, sort_keys=True)
@@ -103,15 +119,57 @@ class Proxy:
     meta: dict = field(default_factory=dict)
 
 
+def decimated(mesh: trimesh.Trimesh, max_faces: int) -> trimesh.Trimesh:
+    """``mesh`` itself, or a quadric-decimated copy with at most about ``max_faces`` faces (0 = no limit)."""
+    if max_faces <= 0 or len(mesh.faces) <= max_faces:
+        return mesh
+    import fast_simplification
+
+    v, f = fast_simplification.simplify(np.asarray(mesh.vertices, dtype=np.float32),
+                                        np.asarray(mesh.faces, dtype=np.int32),
+                                        target_reduction=1.0 - max_faces / len(mesh.faces))
+    out = trimesh.Trimesh(np.asarray(v, dtype=float), np.asarray(f, dtype=np.int64), process=True)
+    return out if len(out.faces) >= 4 else mesh
+
+
+def hull_excess(mesh: trimesh.Trimesh, samples: int = 1024, seed: int = 0) -> float:
+    """How far a mesh's convex hull reaches beyond the mesh: the 95th percentile of the distance from seeded
+    samples of the hull's surface to the mesh surface, divided by the mesh's bounding-box diagonal.
+
+    0 for a convex mesh; a table on legs, a bowl or an L-shape scores high.
+    """
+    hull = mesh.convex_hull
+    pts, _ = trimesh.sample.sample_surface(hull, samples, seed=seed)
+    _, dist, _ = trimesh.proximity.closest_point(mesh, pts)
+    diag = float(np.linalg.norm(mesh.extents))
+    return float(np.percentile(dist, 95)) / diag if diag > 0 else 0.0
+
+
 def decompose(mesh: trimesh.Trimesh, params: ProxyParams) -> list[np.ndarray]:
-    """Convex decomposition of a local-frame mesh.
+    """Convex decomposition of a local-frame mesh (:func:`decompose_route` without the route)."""
+    return decompose_route(mesh, params)[0]
+
+
+def decompose_route(mesh: trimesh.Trimesh, params: ProxyParams) -> tuple[list[np.ndarray], str]:
+    """Convex decomposition of a local-frame mesh, and the route it took (:data:`ROUTES`).
+
+    Large meshes are decimated first (``max_faces``); a nearly convex one (``convex_tolerance``) gets its
+    convex hull; anything else goes to the backend.
 
     Returns
     -------
     hulls : list of (v, 3) float
+    route : str
     """
     if params.backend == "convex":
-        return [np.asarray(mesh.convex_hull.vertices, dtype=float)]
+        return [np.asarray(mesh.convex_hull.vertices, dtype=float)], "convex"
+    work = decimated(mesh, params.max_faces)
+    if params.convex_tolerance > 0 and hull_excess(work, seed=params.seed) <= params.convex_tolerance:
+        return [np.asarray(mesh.convex_hull.vertices, dtype=float)], "single_hull"
+    return _decompose(work, params), "decomposed"
+
+
+def _decompose(mesh: trimesh.Trimesh, params: ProxyParams) -> list[np.ndarray]:
     if params.backend == "coacd":
         import coacd
 
@@ -189,10 +247,11 @@ def proxy_for_mesh(mesh_file: str | Path, params: ProxyParams, cache_dir: str | 
     if cached is not None:
         return cached
     t0 = time.perf_counter()
-    hulls = decompose(mesh, params)
+    hulls, route = decompose_route(mesh, params)
     ratio, outside = fidelity(mesh, hulls)
     proxy = Proxy(hulls=hulls, volume_ratio=ratio, max_outside=outside, seconds=time.perf_counter() - t0,
-                  meta={"mesh_hash": mh, "params_hash": ph, "content_hash": hulls_hash(hulls)})
+                  meta={"mesh_hash": mh, "params_hash": ph, "content_hash": hulls_hash(hulls), "route": route,
+                        "faces": int(len(mesh.faces))})
     write_proxies(path, {"_": proxy})
     return proxy
 

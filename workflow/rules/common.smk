@@ -284,3 +284,8 @@ def optional_tables():
     print(f"note: results/tables/real.csv skipped: the {suite} suite's data are not at {root} "
           "(README, 'Real scenes', says how to get them)", file=sys.stderr)
     return []
+
+
+def suite_proxies(wildcards):
+    """`proxies` with the suite's `proxies:` override deep-merged over it (phiscene.config)."""
+    return phiscene.config.deep_merge(config["proxies"], config["suites"][wildcards.suite].get("proxies", {}))

@@ -7,7 +7,7 @@ rule proxies:
     output:
         "results/proxies/{suite}/{scene}.npz",
     params:
-        proxies=config["proxies"],
+        proxies=suite_proxies,
         cache_dir=CACHE,
         version=V.PROXIES,
     log:

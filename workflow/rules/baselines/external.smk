@@ -35,7 +35,7 @@ rule method_proxies:
     wildcard_constraints:
         method=alternation(methods_of_kind("external")),
     params:
-        proxies=config["proxies"],
+        proxies=suite_proxies,
         cache_dir=CACHE,
         version=V.PROXIES,
     log:
