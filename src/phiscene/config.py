@@ -53,6 +53,7 @@ SECTIONS: dict[str, str] = {
     "metrics.alignment": "phiscene.metrics.alignment:AlignmentParams",
     "metrics.mujoco": "phiscene.sim.mujoco:MujocoParams",
     "metrics.pose": "phiscene.metrics.pose:PoseParams",
+    "topology.attached": "phiscene.topology.attached:AttachedParams",
     "export.demo": "phiscene.demo:DemoParams",
 }
 
@@ -247,6 +248,8 @@ def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -
     from phiscene.topology import backend_names, get_backend
 
     for backend, settings in _mapping(config.get("topology"), "topology").items():
+        if backend == "attached":  # the attachment decision every backend runs (SECTIONS)
+            continue
         if backend not in backend_names():
             raise ConfigError(f"config: topology: unknown backend {backend!r} (known: {', '.join(backend_names())})")
         check_params(get_backend(backend).params_cls, settings, f"topology.{backend}")

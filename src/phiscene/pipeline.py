@@ -37,12 +37,12 @@ def run_reference(scene_path: str | Path, out_path: str | Path) -> None:
 
 
 def run_topology(scene_path: str | Path, out_path: str | Path, backend: str, params: dict,
-                 given_path: str | Path | None = None) -> None:
-    """Support graph and placement order of a scene with the named backend."""
+                 given_path: str | Path | None = None, attached: dict | None = None) -> None:
+    """Support graph and placement order of a scene with the named backend (and the attachment decision)."""
     from phiscene import topology
 
     scene = load_scene(scene_path)
-    graph = topology.infer(scene, backend, params, given_path=given_path)
+    graph = topology.infer(scene, backend, params, given_path=given_path, attached=attached)
     topology.save(graph, out_path)
     log.info("%s: %d edges, order %s, dropped %d", backend, len(graph.edges), " ".join(graph.order),
              len(graph.dropped_edges))
@@ -55,11 +55,16 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
     from phiscene import topology
     from phiscene.assembly.assemble import AssemblyParams, ground_scene
 
+    from phiscene.topology.attached import attached_ids
+
     scene = load_scene(scene_path)
     graph = topology.load(topology_path, scene_ids=scene.ids)
     proxies = read_proxies(proxies_path)
+    fixed = {oid: "ground" for oid in attached_ids(graph)}
+    fixed.update({o.id: o.attached for o in scene.objects if o.attached is not None})
     settled, record = ground_scene(scene, graph.order, proxies, AssemblyParams.from_dict(assembly),
-                                   SimSettings.from_dict(sim), Path(cache_dir), progress=progress or log.info)
+                                   SimSettings.from_dict(sim), Path(cache_dir), progress=progress or log.info,
+                                   attached=fixed)
     record["topology"] = str(topology_path)
     write_json(out_log, record)
     save_scene(settled, out_scene)

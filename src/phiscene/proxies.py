@@ -120,7 +120,10 @@ class Proxy:
 
 
 def decimated(mesh: trimesh.Trimesh, max_faces: int) -> trimesh.Trimesh:
-    """``mesh`` itself, or a quadric-decimated copy with at most about ``max_faces`` faces (0 = no limit)."""
+    """``mesh`` itself, or a quadric-decimated copy with about ``max_faces`` faces (0 = no limit).
+
+    Open boundaries are preserved, so a mesh with many holes keeps more faces than the budget.
+    """
     if max_faces <= 0 or len(mesh.faces) <= max_faces:
         return mesh
     import fast_simplification

@@ -9,6 +9,7 @@ rule topology:
     params:
         backend="{backend}",
         settings=topology_settings,
+        attached=config["topology"].get("attached", {}),
         version=V.TOPOLOGY,
     log:
         "results/logs/topology/{backend}/{suite}/{scene}.log",

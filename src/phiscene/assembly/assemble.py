@@ -101,7 +101,7 @@ def _round(v, digits: int = 9) -> float | None:
 
 def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], params: AssemblyParams,
                  sim: SimSettings, cache_dir: Path, progress: Callable[[str], None] | None = None,
-                 ) -> tuple[Scene, dict]:
+                 attached: dict[str, str] | None = None) -> tuple[Scene, dict]:
     """Physically ground a scene by topology-ordered penetration resolution and settling.
 
     Parameters
@@ -120,6 +120,10 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         Cache root (SDF grids, hull OBJ files).
     progress
         Called with one line per object.
+    attached
+        Objects fixed in place (id -> what holds them, :attr:`phiscene.scene.SceneObject.attached`): placed first,
+        static at their input pose (never moved, settled or dropped), context for the others; the result
+        carries the attachment.
 
     Returns
     -------
@@ -137,6 +141,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
 
     t_start = time.perf_counter()
     order, appended = full_order(scene, order)
+    attached = dict(attached or {})
+    order = [o for o in order if o in attached] + [o for o in order if o not in attached]
     if appended:
         log.warning("objects not in the placement order, appended at the end: %s", ", ".join(appended))
     if params.settle:
@@ -154,6 +160,16 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             initial = np.asarray(obj.pose, dtype=float)
             pose = initial.copy()
             rec: dict = {"index": index, "seconds": {}}
+
+            if oid in attached:
+                _fix(world if params.settle else None, oid, obj.mesh(), proxies.get(oid), pose, sim, rec)
+                poses[oid] = pose
+                if params.penetration:
+                    placed.append(sdf_body(oid, obj.mesh(), pose, pp.n_context, pp, cache_dir))
+                objects[oid] = rec
+                if progress is not None:
+                    progress(f"[{index + 1}/{len(order)}] {oid}: attached to {attached[oid]}, kept in place")
+                continue
 
             t0 = time.perf_counter()
             if params.penetration:
@@ -190,9 +206,27 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                "seconds": _round(time.perf_counter() - t_start, 6)}
     if unsettled:
         log.warning("objects that did not meet the settling criterion: %s", ", ".join(unsettled))
+    summary["attached"] = sorted(attached)
     record = {"format": LOG_FORMAT, "order": order, "appended": appended, "params": params.to_dict(),
               "sim": sim.to_dict(), "objects": objects, "summary": summary}
-    return scene.with_poses(poses), record
+    out = scene.with_poses(poses)
+    for o in out.objects:
+        if o.id in attached:
+            o.attached = attached[o.id]
+    return out, record
+
+
+def _fix(world, oid: str, mesh, proxy: Proxy | None, pose: np.ndarray, sim: SimSettings, rec: dict) -> None:
+    """An attached object: a static collider at its input pose (when settling); fills ``rec``."""
+    from phiscene.inertia import rigid_props
+
+    if world is not None:
+        world.add_body(oid, proxy.hulls, pose, rigid_props(mesh, proxy.hulls, sim.density, decompose(pose)[2]))
+        world.set_static(oid)
+    rec.update(sdf_iterations=0, sdf_initial_loss=None, sdf_final_loss=None, sdf_translation=[0.0, 0.0, 0.0],
+               sdf_context=[], sdf_grid_error=None, settle_frames=0, settled=True, settle_remedy="attached",
+               residual_translation=0.0, residual_rotation=0.0, settle_translation=0.0, settle_rotation=0.0,
+               displacement=0.0, rotation_change=0.0)
 
 
 def _resolve(oid: str, mesh, pose: np.ndarray, placed: list[SdfBody], ground_height: float,

@@ -37,6 +37,10 @@ Post-simulation drift (pybullet)
     rotation angle in degrees. Scene values are means over objects. The MuJoCo
     counterpart is :func:`phiscene.sim.mujoco.drift_mujoco`.
 
+Attached objects (:attr:`phiscene.scene.SceneObject.attached`: fixed to a wall, the ceiling or the ground) are
+static colliders in both simulators, are not lifted, and are left out of the drift and floating means (their
+per-object entries say ``attached``); they still count in the penetration depth.
+
 Units: metres and degrees.
 """
 
@@ -194,7 +198,7 @@ def contact_validity(scene: "Scene", params: PhysicalParams, prune: bool = True)
     for i, o in enumerate(objs):
         w = float(best[i]) if np.isfinite(best[i]) else None
         per[o.id] = {"w": w, "closest": closest[i], "pen_depth": max(0.0, -w) if w is not None else 0.0,
-                     "float_dist": max(0.0, w) if w is not None else None}
+                     "float_dist": max(0.0, w) if w is not None and o.attached is None else None}
     floats = [v["float_dist"] for v in per.values() if v["float_dist"] is not None]
     return {"pen_depth": float(np.mean([v["pen_depth"] for v in per.values()])) if per else 0.0,
             "float_dist": float(np.mean(floats)) if floats else 0.0,
@@ -243,19 +247,29 @@ def drift_bullet(scene: "Scene", proxies: dict[str, "Proxy"], params: PhysicalPa
             hulls = proxies[o.id].hulls
             _, _, scale = decompose(o.pose)
             lifted = np.array(o.pose, dtype=float)
-            lifted[:3, 3] += offset
+            if o.attached is None:
+                lifted[:3, 3] += offset
             world.add_body(o.id, hulls, lifted, rigid_props(o.mesh(), hulls, sim.density, scale))
-        com0 = {o.id: world.com_position(o.id) - offset for o in scene.objects}
+            if o.attached is not None:
+                world.set_static(o.id)
+        com0 = {o.id: world.com_position(o.id) - offset for o in scene.objects if o.attached is None}
         world.step_frames(int(params.frames))
         per = {}
         for o in scene.objects:
+            if o.attached is not None:
+                per[o.id] = {"drift_trans": 0.0, "drift_rot": 0.0, "attached": o.attached}
+                continue
             R0, _, _ = decompose(o.pose)
             R1, _, _ = decompose(world.pose(o.id))
             per[o.id] = {"drift_trans": float(np.linalg.norm(world.com_position(o.id) - com0[o.id])),
                          "drift_rot": math.degrees(rotation_angle(R0, R1))}
-    return {"drift_trans": float(np.mean([v["drift_trans"] for v in per.values()])),
-            "drift_rot": float(np.mean([v["drift_rot"] for v in per.values()])),
-            "ground_below": floor, "objects": per}
+    return {**free_means(per, ("drift_trans", "drift_rot")), "ground_below": floor, "objects": per}
+
+
+def free_means(per: dict[str, dict], keys: tuple[str, ...]) -> dict[str, float]:
+    """Means of ``keys`` over the per-object entries that are not ``attached`` (0 when every object is)."""
+    free = [v for v in per.values() if "attached" not in v]
+    return {k: float(np.mean([v[k] for v in free])) if free else 0.0 for k in keys}
 
 
 # -- entry point -----------------------------------------------------------------------------------------------------

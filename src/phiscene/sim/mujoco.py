@@ -290,9 +290,10 @@ def build_spec(scene: "Scene", proxies: dict[str, "Proxy"], sim: SimSettings, gr
         body.iquat = [1.0, 0.0, 0.0, 0.0]
         body.inertia = props.principal_moments
         body.explicitinertial = True
-        joint = body.add_freejoint()
-        joint.name = f"{o.id}/free"
-        joint.damping = _set_first(joint.damping, lin_rate * props.mass)
+        if o.attached is None:  # attached objects are welded to the world (no joint)
+            joint = body.add_freejoint()
+            joint.name = f"{o.id}/free"
+            joint.damping = _set_first(joint.damping, lin_rate * props.mass)
         # object link frame seen from the body (principal) frame; hulls are link-frame vertices times scale
         link = make_pose(props.principal_axes.T, -props.principal_axes.T @ props.com)
         for k, hull in enumerate(proxy.hulls):
@@ -414,7 +415,7 @@ def drift_mujoco(scene: "Scene", proxies: dict[str, "Proxy"], params: DriftParam
     if frames < 0:
         raise ValueError(f"frames must be >= 0, got {params.frames}")
     lift = make_pose(translation=[0.0, 0.0, offset])
-    lifted = scene.with_poses({o.id: lift @ o.pose for o in scene.objects})
+    lifted = scene.with_poses({o.id: lift @ o.pose for o in scene.objects if o.attached is None})
     floor = ground_below(scene)
     spec = build_spec(lifted, proxies, sim, floor, mj)
     model = compile_model(spec, sim)
@@ -423,16 +424,20 @@ def drift_mujoco(scene: "Scene", proxies: dict[str, "Proxy"], params: DriftParam
     start = body_poses(model, data, scene.ids)
     step_frames(model, data, frames, sim)
     end = body_poses(model, data, scene.ids)
+    from phiscene.metrics.physical import free_means
+
     objects = {}
-    for name in scene.ids:
+    for o in scene.objects:
+        name = o.id
+        if o.attached is not None:
+            objects[name] = {"drift_trans": 0.0, "drift_rot": 0.0, "attached": o.attached}
+            continue
         com0 = start[name][:3, 3] - [0.0, 0.0, offset]
         objects[name] = {
             "drift_trans": float(np.linalg.norm(end[name][:3, 3] - com0)),
             "drift_rot": math.degrees(rotation_angle(start[name][:3, :3], end[name][:3, :3])),
         }
-    return {"drift_trans": float(np.mean([v["drift_trans"] for v in objects.values()])),
-            "drift_rot": float(np.mean([v["drift_rot"] for v in objects.values()])),
-            "ground_below": floor, "objects": objects}
+    return {**free_means(objects, ("drift_trans", "drift_rot")), "ground_below": floor, "objects": objects}
 
 
 def write_mjcf(spec: "mujoco.MjSpec", path: str | Path) -> Path:

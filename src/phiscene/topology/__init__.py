@@ -85,7 +85,8 @@ def get_backend(name: str) -> Backend:
     return _REGISTRY[name]
 
 
-def infer(scene, backend: str, params: dict | None = None, given_path: str | Path | None = None) -> SupportGraph:
+def infer(scene, backend: str, params: dict | None = None, given_path: str | Path | None = None,
+          attached: dict | None = None) -> SupportGraph:
     """Infer the support graph of ``scene`` with the named backend.
 
     Parameters
@@ -98,15 +99,21 @@ def infer(scene, backend: str, params: dict | None = None, given_path: str | Pat
         The backend's parameters (``config.yaml`` ``topology.<backend>``); unknown keys raise ``ValueError``.
     given_path
         Topology file for backends that read one (``given``); overrides ``params['path']``.
+    attached
+        Settings of the attachment decision (:class:`phiscene.topology.attached.AttachedParams`), run on the
+        graph of every backend that infers one (not on a given file's graph, which says what it says).
 
     Returns
     -------
     The graph, acyclic, with ``order`` and ``dropped_edges`` filled.
     """
+    from phiscene.topology.attached import AttachedParams, mark_attached
+
     b = get_backend(backend)
     params = dict(params or {})
     if given_path is not None:
         if not b.takes_path:
             raise ValueError(f"topology backend {backend!r} does not read a file (given_path={str(given_path)!r})")
         params["path"] = str(given_path)
-    return b.infer(scene, b.params_cls.from_dict(params))
+    graph = b.infer(scene, b.params_cls.from_dict(params))
+    return graph if b.takes_path else mark_attached(scene, graph, AttachedParams.from_dict(attached or {}))

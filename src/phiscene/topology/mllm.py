@@ -29,7 +29,7 @@ each is an error (:class:`MllmResponseError`, naming the cached response file):
 * the ground is ``Plane`` (the prompt's schema) or ``ground``; other spellings (``floor``, ``PLANE``,
   ``ground plane``) are read as the ground; object names are matched case-insensitively;
 * edges naming unknown objects, self loops and edges into the ground are dropped; duplicate edges keep the
-  most confident one; a relation other than ``supports``/``leans_on``/``contains`` becomes ``supports``;
+  most confident one; a relation other than ``supports``/``leans_on``/``contains``/``attached`` becomes ``supports``;
   a missing confidence becomes ``default_confidence``;
 * an object without any supporter gets ``ground -> object`` with ``fallback_confidence`` (the prompt's
   own rule for undetermined support).
@@ -87,6 +87,8 @@ This includes any contact that contributes to an object's physical support or st
 - If object A is supported by object B, output an edge B -> A.
 - If you cannot determine the support source for an object (e.g., it is fully occluded),
   assume it rests on the ground and add a ground -> object edge with low confidence.
+- An object fixed to a wall or the ceiling (a poster, painting, window, curtain, whiteboard, wall clock,
+  ceiling fan, hanging lamp) is not supported from below: add one ground -> object edge with relation "attached".
 
 Return strict JSON with this schema:
 {
@@ -107,7 +109,7 @@ Object list (every name below must appear in "objects"):
 
 #: Names the ground may be given in a response (compared lower-case).
 GROUND_ALIASES = ("plane", "ground", "floor", "ground plane", "ground_plane")
-RELATIONS = ("supports", "leans_on", "contains")
+RELATIONS = ("supports", "leans_on", "contains", "attached")
 PROVIDERS = ("gemini", "openai")
 DEFAULT_KEY_ENV = {"gemini": "GEMINI_API_KEY", "openai": "OPENAI_API_KEY"}
 

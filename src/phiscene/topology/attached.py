@@ -1,0 +1,171 @@
+"""Objects fixed to a wall or the ceiling: posters, paintings, windows, curtains, clocks, ceiling fans.
+
+A gravity-only pipeline drops them to the floor. Every topology backend runs :func:`mark_attached` on its graph:
+an object it decides is attached loses its support edges and gets one ``ground -> object`` edge of relation
+``attached`` (the ground node stands for the fixed world: walls and ceiling included). The grounding keeps such
+objects static where they are; metrics treat them as colliders and leave them out of drift averages.
+
+The decision (:func:`attached_objects`) combines two signals, each of which can only *add* an attachment when
+nothing holds the object from below (no other object's surface, and not the ground, within ``support_gap`` under
+its footprint):
+
+* description: a wall or ceiling object (:data:`WALL_WORDS`, e.g. "poster", "painting", "curtain",
+  "whiteboard", "ceiling fan") or an explicit "on the wall" / "hanging" phrase (:data:`MOUNT_PHRASES`);
+* geometry: a thin vertical panel (smallest extent <= ``thin_ratio`` times the largest, its thin axis
+  horizontal) whose bottom is at least ``min_height`` above the ground, or anything whose top is within
+  ``ceiling_gap`` of the highest point of the scene while its bottom is above ``min_height`` (a ceiling
+  fixture), when the scene is a room (its height is at least ``room_height``).
+
+Objects resting on something stay free whatever their description says (a painting standing on a dresser).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from phiscene.params import Params
+from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph
+
+#: Words naming objects that are normally fixed to a wall or the ceiling.
+WALL_WORDS = ("poster", "painting", "picture", "artwork", "art", "frame", "framed", "window", "curtain", "curtains",
+              "blind", "blinds", "whiteboard", "blackboard", "chalkboard", "clock", "mirror", "fan", "chandelier",
+              "sconce", "pendant", "canvas", "print", "photo", "photograph", "calendar", "board", "tapestry")
+#: Phrases saying an object is mounted (matched in the lower-case description).
+MOUNT_PHRASES = ("on the wall", "on wall", "wall mounted", "wall-mounted", "mounted", "hanging", "hung",
+                 "on the ceiling", "from the ceiling", "ceiling")
+#: Relation name of an attachment edge.
+ATTACHED = "attached"
+
+
+@dataclass(frozen=True)
+class AttachedParams(Params):
+    """Thresholds of the attachment decision (``config.yaml`` ``topology.attached``).
+
+    Attributes
+    ----------
+    enabled
+        Run the decision (false: no object is ever attached by inference).
+    support_gap
+        A surface within this distance (m) under an object's footprint holds it from below.
+    min_height
+        An attached object's bottom is at least this high (m) above the ground.
+    thin_ratio
+        A panel's smallest extent is at most this fraction of its largest.
+    ceiling_gap
+        A ceiling fixture's top is within this distance (m) of the scene's highest point.
+    room_height
+        Ceiling fixtures are only looked for in scenes at least this tall (m).
+    samples
+        Footprint points per object for the support test.
+    """
+
+    _label = "attachment parameters"
+
+    enabled: bool = True
+    support_gap: float = 0.03
+    min_height: float = 0.3
+    thin_ratio: float = 0.15
+    ceiling_gap: float = 0.15
+    room_height: float = 2.0
+    samples: int = 64
+
+    def check(self) -> None:
+        """Non-negative distances, a ratio in (0, 1), at least 4 samples (``ValueError``)."""
+        if min(self.support_gap, self.min_height, self.ceiling_gap, self.room_height) < 0:
+            raise ValueError("attachment distances must be >= 0")
+        if not 0 < self.thin_ratio < 1 or self.samples < 4:
+            raise ValueError("attachment 'thin_ratio' must be in (0, 1) and 'samples' >= 4")
+
+
+def says_mounted(description: str) -> bool:
+    """Whether a description names a wall/ceiling object or says it is mounted (:data:`WALL_WORDS`, phrases)."""
+    text = description.lower()
+    words = set(re.findall(r"[a-z]+", text))
+    return bool(words & set(WALL_WORDS)) or any(p in text for p in MOUNT_PHRASES)
+
+
+def _held_from_below(scene, oid: str, world: dict, ground: float, params: AttachedParams) -> bool:
+    """Whether a surface (another object or the ground) lies within ``support_gap`` under ``oid``'s lowest points."""
+    import trimesh
+
+    mesh = world[oid]
+    lo = float(mesh.bounds[0, 2])
+    if lo - ground <= params.support_gap:
+        return True
+    # the object's lowest vertices (within 2 cm of its bottom), subsampled: rays cast downwards from them
+    v = mesh.vertices[mesh.vertices[:, 2] <= lo + 0.02]
+    if len(v) > params.samples:
+        v = v[np.linspace(0, len(v) - 1, params.samples).astype(int)]
+    for other, m in world.items():
+        if other == oid:
+            continue
+        (ox0, oy0, oz0), (ox1, oy1, oz1) = m.bounds
+        near = (v[:, 0] >= ox0) & (v[:, 0] <= ox1) & (v[:, 1] >= oy0) & (v[:, 1] <= oy1)
+        if not near.any() or oz1 < lo - params.support_gap or oz0 > float(mesh.bounds[1, 2]):
+            continue
+        origins = v[near] + [0.0, 0.0, 1e-3]
+        hits = trimesh.ray.ray_triangle.RayMeshIntersector(m).intersects_location(
+            origins, np.tile([0.0, 0.0, -1.0], (len(origins), 1)))[0]
+        if len(hits) and (lo - hits[:, 2].max()) <= params.support_gap:
+            return True
+        # touching or interpenetrating from the side/below also holds it (e.g. a shelf board)
+        if oz1 >= lo and m.bounds[0, 2] < lo:
+            inside = trimesh.proximity.signed_distance(m, v[near][: min(16, int(near.sum()))]) > -params.support_gap
+            if inside.any():
+                return True
+    return False
+
+
+def attached_objects(scene, params: AttachedParams = AttachedParams()) -> dict[str, str]:
+    """Objects decided attached (module docstring) -> why (``description``, ``panel`` or ``ceiling``).
+
+    Objects already marked :attr:`~phiscene.scene.SceneObject.attached` in the scene are kept (reason ``given``).
+    """
+    out = {o.id: "given" for o in scene.objects if o.attached is not None}
+    if not params.enabled:
+        return out
+    world = {o.id: o.world_mesh() for o in scene.objects}
+    ground = float(scene.ground_height)
+    top = max(float(m.bounds[1, 2]) for m in world.values())
+    room = top - ground >= params.room_height
+    for o in scene.objects:
+        if o.id in out:
+            continue
+        m = world[o.id]
+        lo, hi = m.bounds
+        ext = np.sort(hi - lo)
+        if lo[2] - ground < params.min_height:
+            continue
+        thin_axis = int(np.argmin(hi - lo))
+        panel = ext[0] <= params.thin_ratio * ext[2] and thin_axis != 2
+        ceiling = room and top - hi[2] <= params.ceiling_gap
+        why = "description" if says_mounted(o.description or o.id.replace("_", " ")) else \
+            "panel" if panel else "ceiling" if ceiling else None
+        if why is None or _held_from_below(scene, o.id, world, ground, params):
+            continue
+        out[o.id] = why
+    return out
+
+
+def mark_attached(scene, graph: SupportGraph, params: AttachedParams = AttachedParams()) -> SupportGraph:
+    """``graph`` with every attached object's incoming edges replaced by one ``ground -attached-> object`` edge.
+
+    Edges out of an attached object (what it carries, e.g. a wall shelf) are kept. The decision is recorded in
+    ``graph.meta["attached"]`` (id -> reason).
+    """
+    decided = attached_objects(scene, params)
+    if not decided:
+        return replace(graph, meta={**graph.meta, "attached": {}})
+    edges = [e for e in graph.edges if e.target not in decided]
+    edges += [SupportEdge(GROUND, oid, ATTACHED, 1.0, f"fixed to a wall or the ceiling ({why})")
+              for oid, why in decided.items()]
+    return replace(graph, edges=edges, meta={**graph.meta, "attached": decided})
+
+
+def attached_ids(graph: SupportGraph) -> list[str]:
+    """Objects with an ``attached`` edge in a support graph, in node order."""
+    fixed = {e.target for e in graph.edges if e.relation == ATTACHED}
+    return [o for o in graph.object_ids if o in fixed]

@@ -1,0 +1,82 @@
+"""Objects fixed to a wall or the ceiling: decided from geometry and descriptions, kept in place, not drifting."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from phiscene import topology
+from phiscene.assembly import AssemblyParams, ground_scene
+from phiscene.meshes import save_mesh
+from phiscene.metrics.physical import PhysicalParams, physical_metrics
+from phiscene.proxies import ProxyParams, scene_proxies
+from phiscene.scene import Scene, SceneObject
+from phiscene.sim.mujoco import drift_mujoco
+from phiscene.sim.settings import SimSettings
+from phiscene.topology.attached import AttachedParams, attached_ids, attached_objects, says_mounted
+from phiscene.transforms import make_pose
+
+SIM = SimSettings()
+
+
+@pytest.fixture(scope="module")
+def room(tmp_path_factory):
+    """A room corner: a table with a book on it, a poster on the wall, a ceiling lamp, a painting on the table."""
+    root = tmp_path_factory.mktemp("attached")
+    boxes = {"table": (1.0, 0.6, 0.75), "book": (0.25, 0.18, 0.04), "poster": (0.6, 0.01, 0.8),
+             "lamp": (0.3, 0.3, 0.2), "painting": (0.4, 0.03, 0.3), "shelf_poster": (0.5, 0.01, 0.7)}
+    mesh = {n: save_mesh(trimesh.creation.box(s), root / f"{n}.obj") for n, s in boxes.items()}
+    objs = [
+        SceneObject("table", mesh["table"], make_pose(translation=[0, 0, 0.375]), "wooden table"),
+        SceneObject("book", mesh["book"], make_pose(translation=[0.2, 0, 0.77]), "a red book"),
+        SceneObject("poster", mesh["poster"], make_pose(translation=[0, 0.6, 1.6]), "paper poster on the back wall"),
+        SceneObject("lamp", mesh["lamp"], make_pose(translation=[1.5, 0, 2.4]), "lamp hanging from the ceiling"),
+        SceneObject("painting", mesh["painting"], make_pose(translation=[-0.3, 0.2, 0.9]), "framed painting"),
+        SceneObject("shelf_poster", mesh["shelf_poster"], make_pose(translation=[-1.5, 0.6, 1.2]), "object_7"),
+    ]
+    return {"scene": Scene(objs), "cache": root / "cache"}
+
+
+def test_descriptions():
+    assert says_mounted("paper poster on the back wall") and says_mounted("brown ceiling fan")
+    assert says_mounted("white curtain") and not says_mounted("wooden chair") and not says_mounted("red book")
+
+
+def test_decision_from_geometry_and_description(room):
+    decided = attached_objects(room["scene"])
+    # poster: description + no support; lamp: description; shelf_poster: a thin vertical panel high up, no name
+    assert decided == {"poster": "description", "lamp": "description", "shelf_poster": "panel"}
+    # the painting stands on the table (held from below) and the book lies on it: both stay free
+    assert "painting" not in decided and "book" not in decided
+    assert attached_objects(room["scene"], AttachedParams(enabled=False)) == {}
+
+
+def test_graph_gets_attached_edges_for_every_inferring_backend(room):
+    for backend in ("geometric", "height"):
+        g = topology.infer(room["scene"], backend, {})
+        assert attached_ids(g) == ["poster", "lamp", "shelf_poster"]
+        assert g.parents("poster") == ["ground"]
+        assert set(g.order) == set(room["scene"].ids)
+
+
+def test_poster_stays_put_and_is_left_out_of_drift(room):
+    scene = room["scene"]
+    proxies = scene_proxies(scene, ProxyParams(backend="convex"), room["cache"])
+    g = topology.infer(scene, "geometric", {})
+    fixed = {oid: "ground" for oid in attached_ids(g)}
+    out, record = ground_scene(scene, g.order, proxies, AssemblyParams(), SIM, room["cache"], attached=fixed)
+    for oid in fixed:  # exactly where they were, and marked
+        np.testing.assert_array_equal(out.get(oid).pose, scene.get(oid).pose)
+        assert out.get(oid).attached == "ground"
+        assert record["objects"][oid]["settle_remedy"] == "attached"
+    # without the attachment a gravity-only grounding drops the poster to the floor (what the issue reports)
+    dropped, _ = ground_scene(scene, g.order, proxies, AssemblyParams(), SIM, room["cache"])
+    assert dropped.get("poster").world_mesh().bounds[0, 2] < 0.05
+    # drift: attached objects are static colliders and not in the means
+    phys = physical_metrics(out, proxies, PhysicalParams(samples=256), SIM, room["cache"])
+    assert phys["objects"]["poster"]["attached"] == "ground" and phys["objects"]["poster"]["float_dist"] is None
+    free = [v["drift_trans"] for k, v in phys["objects"].items() if k not in fixed]
+    assert phys["drift_trans"] == pytest.approx(float(np.mean(free)))
+    mj = drift_mujoco(out, proxies, PhysicalParams(samples=256), SIM)
+    assert mj["objects"]["lamp"]["attached"] == "ground" and mj["drift_trans"] < 0.01

@@ -1,0 +1,76 @@
+"""Real-size meshes (tens of thousands of faces, not watertight) through the proxies in bounded time."""
+
+import time
+
+import numpy as np
+import pytest
+import trimesh
+
+from phiscene.proxies import ProxyParams, decimated, decompose_route, fidelity, hull_excess
+
+
+def open_dense(mesh: trimesh.Trimesh, faces: int = 30000) -> trimesh.Trimesh:
+    """``mesh`` subdivided to at least ``faces`` faces, with every 23rd face removed (not watertight)."""
+    m = mesh.copy()
+    while len(m.faces) < faces:
+        m = m.subdivide()
+    m.update_faces(np.arange(len(m.faces)) % 23 != 5)
+    m.remove_unreferenced_vertices()
+    return m
+
+
+def table_mesh() -> trimesh.Trimesh:
+    """A table: a 1.0 x 0.6 x 0.04 m top on four 0.7 m legs (clearly not convex)."""
+    T = trimesh.transformations.translation_matrix
+    parts = [trimesh.creation.box([1.0, 0.6, 0.04], transform=T([0, 0, 0.72]))]
+    parts += [trimesh.creation.box([0.05, 0.05, 0.7], transform=T([sx * 0.45, sy * 0.25, 0.35]))
+              for sx in (-1, 1) for sy in (-1, 1)]
+    return trimesh.util.concatenate(parts)
+
+
+def test_fruit_like_mesh_takes_one_hull_quickly():
+    fruit = open_dense(trimesh.creation.icosphere(4, 0.05).apply_scale([1.0, 1.0, 1.25]))
+    assert len(fruit.faces) >= 30000 and not fruit.is_watertight
+    t0 = time.perf_counter()
+    hulls, route = decompose_route(fruit, ProxyParams())
+    assert route == "single_hull" and len(hulls) == 1
+    assert time.perf_counter() - t0 < 10.0
+    # the hull is the mesh's convex hull: no mesh point outside it (fidelity's own plane test, independent of route)
+    assert fidelity(fruit, hulls)[1] < 1e-9
+
+
+def test_table_is_decomposed_within_bounded_time_and_covers_the_mesh():
+    table = open_dense(table_mesh())
+    assert len(table.faces) >= 30000 and not table.is_watertight
+    # the hull of a table on legs reaches far from its surface (under the top): ~ leg height / diagonal
+    assert hull_excess(decimated(table, 2000)) > 0.1
+    t0 = time.perf_counter()
+    hulls, route = decompose_route(table, ProxyParams(mcts_iterations=10, mcts_nodes=8, resolution=300, max_hulls=8))
+    elapsed = time.perf_counter() - t0
+    assert route == "decomposed" and len(hulls) >= 2
+    assert elapsed < 60.0, elapsed
+    # the proxies cover the original (not the decimated) mesh within 2 % of its diagonal
+    diag = float(np.linalg.norm(table.extents))
+    assert fidelity(table, hulls)[1] < 0.02 * diag
+    # and they do not fill the space under the top: a point 0.3 m below the top's centre is inside no hull
+    probe = np.array([0.0, 0.0, 0.4])
+    assert not any(trimesh.convex.convex_hull(h).contains([probe])[0] for h in hulls)
+
+
+def test_decimation_keeps_shape_and_budget():
+    closed = trimesh.creation.icosphere(6, 0.1)  # 81920 faces
+    small = decimated(closed, 2000)
+    assert len(small.faces) <= 2100
+    assert np.abs(np.linalg.norm(small.vertices, axis=1) - 0.1).max() < 5e-3  # still the sphere
+    # open boundaries are kept, so a mesh with many holes keeps more faces, but far fewer than it had
+    dense = open_dense(trimesh.creation.box([0.3, 0.2, 0.1]))
+    small = decimated(dense, 2000)
+    assert len(small.faces) < len(dense.faces) / 4
+    np.testing.assert_allclose(small.bounds, dense.bounds, atol=2e-3)
+    assert decimated(dense, 0) is dense
+
+
+@pytest.mark.parametrize("bad", [{"max_faces": 50}, {"convex_tolerance": -0.1}, {"convex_tolerance": 1.5}])
+def test_bad_budgets_rejected(bad):
+    with pytest.raises(ValueError):
+        ProxyParams.from_dict(bad)
