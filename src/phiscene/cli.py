@@ -111,16 +111,16 @@ def cmd_export(args: argparse.Namespace) -> None:
     if not args.topology:
         print("[2/3] support graph (geometric)", flush=True)
         pipeline.run_topology(scene, topology, "geometric", cfg.get("topology", {}).get("geometric", {}))
-    print("[3/3] export (GLB, URDF, MJCF, support graph)" + ("" if args.no_check else " + round-trip check"),
+    print("[3/3] export (GLB, URDF, MJCF, USD, support graph)" + ("" if args.no_check else " + round-trip check"),
           flush=True)
     metrics = cfg.get("metrics", {})
     manifest = run_export(scene, proxies, out, cfg.get("sim", {}), metrics.get("mujoco", {}), topology,
                           None if args.no_check else metrics.get("physical", {}), cache)
-    for name in ("glb", "urdf_index", "mjcf", "support_graph"):
+    for name in ("glb", "urdf_index", "mjcf", "usd", "support_graph"):
         print(f"wrote {out / manifest['files'][name]}")
     if not args.no_check:
         check = json.loads((out / "roundtrip.json").read_text())
-        for engine in ("pybullet", "mujoco"):
+        for engine in [e for e in ("pybullet", "mujoco", "usd") if e in check]:
             c = check[engine]
             print(f"round trip {engine}: max drift difference {c['max_diff_trans'] * 1000:.3f} mm / "
                   f"{c['max_diff_rot']:.3f} deg ({'ok' if c['ok'] else 'OUTSIDE 2 mm / 1 deg'})")
@@ -219,7 +219,7 @@ def build_parser() -> argparse.ArgumentParser:
                                       "{room} (default: the initial scene is a copy of the GT)")
     f3.set_defaults(func=cmd_import_front3d)
 
-    e = sub.add_parser("export", help="simulation-ready export of one scene (GLB, URDF, MJCF, support graph)")
+    e = sub.add_parser("export", help="simulation-ready export of one scene (GLB, URDF, MJCF, USD, support graph)")
     e.add_argument("scene", help="scene.json or its folder (a settled scene)")
     e.add_argument("out_dir", help="output folder")
     e.add_argument("--proxies", help="convex proxies .npz of the scene (default: computed with the config's settings)")

@@ -1,5 +1,6 @@
 # Simulation-ready outputs (phiscene.io.export, phiscene.demo): `snakemake -j2 exports`.
-#   results/export/{method}/{suite}/{scene}/   scene.glb, scene.xml (MJCF), scene_urdf.json + urdf/ + meshes/,
+#   results/export/{method}/{suite}/{scene}/   scene.glb, scene.xml (MJCF), scene.usda (OpenUSD + UsdPhysics),
+#                                              scene_urdf.json + urdf/ + meshes/,
 #                                              support_graph.json, export.json, roundtrip.json
 #   results/demo/{suite}/{scene}.gif (+ .json) a ball thrown into the exported scene of export.demo_method
 # `rule all` builds the demos of the first export.report_demos scenes of each suite (the report shows them).
@@ -16,6 +17,7 @@ rule export_scene:
     output:
         glb="results/export/{method}/{suite}/{scene}/scene.glb",
         mjcf="results/export/{method}/{suite}/{scene}/scene.xml",
+        usd="results/export/{method}/{suite}/{scene}/scene.usda",
         urdf="results/export/{method}/{suite}/{scene}/scene_urdf.json",
         graph="results/export/{method}/{suite}/{scene}/support_graph.json",
         roundtrip="results/export/{method}/{suite}/{scene}/roundtrip.json",

@@ -12,6 +12,8 @@ call of :func:`export_scene` writes into an output folder::
     urdf/ground.urdf        the static ground slab
     meshes/<id>/visual.obj  the object's mesh in its link frame (pose scale applied)
     meshes/<id>/hull_<k>.stl  its convex proxies in the same frame
+    scene.usda              OpenUSD stage with UsdPhysics rigid bodies, mass properties, convex colliders and a
+                            physics material (:mod:`phiscene.io.usd`; Isaac Sim, Omniverse, usdview)
     support_graph.json      the full multi-parent support graph (``phiscene.topology/1``)
     export.json             manifest: files, settings, object ids
 
@@ -123,7 +125,7 @@ DEFAULT_RGB = (150, 150, 150)
 #: MuJoCo geom groups: visual meshes and collision hulls.
 MJ_VISUAL_GROUP, MJ_COLLISION_GROUP = 2, 3
 #: File names inside an export folder.
-FILES = {"glb": "scene.glb", "mjcf": "scene.xml", "urdf_index": "scene_urdf.json",
+FILES = {"glb": "scene.glb", "mjcf": "scene.xml", "urdf_index": "scene_urdf.json", "usd": "scene.usda",
          "support_graph": "support_graph.json", "manifest": "export.json"}
 
 
@@ -575,13 +577,16 @@ def export_scene(scene: "Scene", proxies: dict[str, "Proxy"], out_dir: str | Pat
         if (out_dir / sub).is_dir():
             shutil.rmtree(out_dir / sub)
     props = object_props(scene, proxies, sim)
-    files = {"glb": FILES["glb"], "mjcf": FILES["mjcf"], "urdf_index": FILES["urdf_index"]}
+    from phiscene.io.usd import export_usd
+
+    files = {"glb": FILES["glb"], "mjcf": FILES["mjcf"], "urdf_index": FILES["urdf_index"], "usd": FILES["usd"]}
     export_glb(scene, out_dir / FILES["glb"])
     if graph is not None:
         export_support_graph(graph, scene, out_dir / FILES["support_graph"])
         files["support_graph"] = FILES["support_graph"]
     export_urdf(scene, proxies, out_dir, sim, props, files.get("support_graph"))
     export_mjcf(scene, proxies, out_dir / FILES["mjcf"], sim, mj)
+    export_usd(scene, proxies, out_dir / FILES["usd"], sim, graph, props)
     manifest = {"format": EXPORT_FORMAT, "files": files, "objects": scene.ids,
                 "urdf": {o.id: f"urdf/{o.id}.urdf" for o in scene.objects},
                 "masses": {oid: p.mass for oid, p in props.items()}, "ground_height": float(scene.ground_height),
@@ -708,7 +713,8 @@ def roundtrip_check(export_dir: str | Path, scene: "Scene", proxies: dict[str, "
     """Release the exported files in fresh worlds and compare with the pipeline's drift.
 
     The URDF scene goes into a fresh pybullet client (:func:`release_urdf`),
-    the MJCF into MuJoCo from the file (:func:`release_mjcf`), each for
+    the MJCF into MuJoCo from the file (:func:`release_mjcf`), the USD stage, read back with ``pxr``, into
+    another fresh pybullet world (:func:`phiscene.io.usd.release_usd`), each for
     ``params.frames * sim.frame_dt`` seconds after a lift of
     ``params.upward_offset``; the pipeline's drifts are
     :func:`phiscene.metrics.physical.drift_bullet` and
@@ -724,18 +730,24 @@ def roundtrip_check(export_dir: str | Path, scene: "Scene", proxies: dict[str, "
     ``{"seconds", "tolerance": {"trans", "rot"}, "pybullet": {...}, "mujoco": {...}, "ok"}`` where each
     engine entry has ``export``, ``pipeline``, ``max_diff_trans`` (m), ``max_diff_rot`` (deg), ``ok``.
     """
+    from phiscene.io.usd import release_usd
     from phiscene.metrics.physical import drift_bullet
     from phiscene.sim.mujoco import drift_mujoco
 
     export_dir = Path(export_dir)
     seconds = int(params.frames) * sim.frame_dt
     offset = float(params.upward_offset)
-    bullet = _compare(release_urdf(export_dir / FILES["urdf_index"], seconds, offset),
-                      drift_bullet(scene, proxies, params, sim, cache_dir), tol)
+    pipeline = drift_bullet(scene, proxies, params, sim, cache_dir)
+    bullet = _compare(release_urdf(export_dir / FILES["urdf_index"], seconds, offset), pipeline, tol)
     mjc = _compare(release_mjcf(export_dir / FILES["mjcf"], seconds, offset),
                    drift_mujoco(scene, proxies, params, sim, mj), tol)
-    return {"seconds": seconds, "upward_offset": offset, "tolerance": {"trans": tol.trans, "rot": tol.rot},
-            "pybullet": bullet, "mujoco": mjc, "ok": bullet["ok"] and mjc["ok"]}
+    out = {"seconds": seconds, "upward_offset": offset, "tolerance": {"trans": tol.trans, "rot": tol.rot},
+           "pybullet": bullet, "mujoco": mjc}
+    if (export_dir / FILES["usd"]).is_file():
+        free = {**pipeline, "objects": {k: v for k, v in pipeline["objects"].items() if "attached" not in v}}
+        out["usd"] = _compare(release_usd(export_dir / FILES["usd"], seconds, offset, cache_dir, sim), free, tol)
+    out["ok"] = all(out[e]["ok"] for e in ("pybullet", "mujoco", "usd") if e in out)
+    return out
 
 
 # -- file level -------------------------------------------------------------------------------
@@ -777,13 +789,19 @@ def run_export(scene_path: str | Path, proxies_path: str | Path, out_dir: str | 
     proxies = read_proxies(proxies_path)
     simset, mj = SimSettings.from_dict(sim), MujocoParams.from_dict(mujoco)
     graph = topology.load(topology_path, scene_ids=scene.ids) if topology_path else None
+    from phiscene.io.usd import validate_usd
+
     manifest = export_scene(scene, proxies, out_dir, simset, mj, graph)
+    manifest["usd_validation_errors"] = validate_usd(Path(out_dir) / FILES["usd"])
+    for message in manifest["usd_validation_errors"]:
+        log.warning("USD validator: %s", message)
+    write_json(Path(out_dir) / FILES["manifest"], manifest)
     log.info("exported %d objects to %s", len(scene.objects), out_dir)
     if physical is not None:
         check = roundtrip_check(out_dir, scene, proxies, PhysicalParams.from_dict(physical), simset,
                                 cache_dir or Path(out_dir) / ".cache", mj)
         write_json(Path(out_dir) / "roundtrip.json", check)
-        for engine in ("pybullet", "mujoco"):
+        for engine in [e for e in ("pybullet", "mujoco", "usd") if e in check]:
             c = check[engine]
             log.info("round trip %s: export drift %.5f m / %.3f deg, pipeline %.5f m / %.3f deg, max diff %.5f m / "
                      "%.3f deg (%s)", engine, c["export"]["drift_trans"], c["export"]["drift_rot"],
