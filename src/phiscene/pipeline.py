@@ -59,7 +59,8 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
     graph = topology.load(topology_path, scene_ids=scene.ids)
     proxies = read_proxies(proxies_path)
     settled, record = ground_scene(scene, graph.order, proxies, AssemblyParams.from_dict(assembly),
-                                   SimSettings.from_dict(sim), Path(cache_dir), progress=progress or log.info)
+                                   SimSettings.from_dict(sim), Path(cache_dir), progress=progress or log.info,
+                                   graph=graph)
     record["topology"] = str(topology_path)
     write_json(out_log, record)
     save_scene(settled, out_scene)

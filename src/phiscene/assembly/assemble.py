@@ -20,6 +20,8 @@ from typing import Callable
 
 import numpy as np
 
+from phiscene.assembly import faithful as fa
+from phiscene.assembly.faithful import FaithfulParams
 from phiscene.assembly.penetration import PenetrationParams, SdfBody, resolve_penetration, sdf_body
 from phiscene.assembly.settle import SettleParams, settle_object, window_motion
 from phiscene.errors import InputError
@@ -49,6 +51,8 @@ class AssemblyParams(Params):
         See :class:`~phiscene.assembly.penetration.PenetrationParams`.
     settle_params
         See :class:`~phiscene.assembly.settle.SettleParams`.
+    faithful
+        See :class:`~phiscene.assembly.faithful.FaithfulParams` (off: the paper's loop exactly).
     """
 
     _label = "assembly parameters"
@@ -57,6 +61,7 @@ class AssemblyParams(Params):
     settle: bool = True
     penetration_params: PenetrationParams = field(default_factory=PenetrationParams)
     settle_params: SettleParams = field(default_factory=SettleParams)
+    faithful: FaithfulParams = field(default_factory=FaithfulParams)
 
     def check(self) -> None:
         """Reject ``penetration`` / ``settle`` switches that are not booleans (``ValueError``)."""
@@ -101,7 +106,7 @@ def _round(v, digits: int = 9) -> float | None:
 
 def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], params: AssemblyParams,
                  sim: SimSettings, cache_dir: Path, progress: Callable[[str], None] | None = None,
-                 ) -> tuple[Scene, dict]:
+                 graph=None) -> tuple[Scene, dict]:
     """Physically ground a scene by topology-ordered penetration resolution and settling.
 
     Parameters
@@ -120,6 +125,9 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         Cache root (SDF grids, hull OBJ files).
     progress
         Called with one line per object.
+    graph
+        The support graph (:class:`~phiscene.topology.graph.SupportGraph`) whose supporters the faithful
+        variant keeps; without it every object is taken to stand on the ground.
 
     Returns
     -------
@@ -131,7 +139,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         ``sdf_context``, ``sdf_grid_error`` (max grid error near the surface, m), ``settle_frames``,
         ``settled``, ``settle_remedy``, ``residual_translation``, ``residual_rotation``,
         ``settle_translation``, ``settle_rotation``, ``displacement``, ``rotation_change``, ``seconds`` per
-        stage) and a ``summary``.
+        stage) and a ``summary``; with ``params.faithful.enabled`` also ``flush_angle`` and a
+        ``certificate`` per object (:func:`~phiscene.assembly.faithful.certificate`).
     """
     from phiscene.sim.bullet import BulletWorld
 
@@ -157,6 +166,17 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             pose = initial.copy()
             rec: dict = {"index": index, "seconds": {}}
 
+            fp = params.faithful
+            info = None
+            if fp.enabled:
+                t0 = time.perf_counter()
+                info = _faithful_info(scene, oid, obj, proxies.get(oid), graph, poses)
+                if fp.flush and info["flushable"]:
+                    pose, info["flush_angle"] = fa.flush_pose(pose, info["normals"], info["com"],
+                                                              info["up"], fp.max_flush_angle)
+                rec["flush_angle"] = _round(info["flush_angle"])
+                rec["seconds"]["flush"] = time.perf_counter() - t0
+
             t0 = time.perf_counter()
             if params.penetration:
                 pose = _resolve(oid, obj.mesh(), pose, placed, scene.ground_height, pp, cache_dir, rec)
@@ -166,7 +186,10 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             rec["seconds"]["sdf"] = time.perf_counter() - t0
 
             t0 = time.perf_counter()
-            if params.settle:
+            if params.settle and info is not None:
+                pose = _settle_faithful(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params,
+                                        fp, info, rec)
+            elif params.settle:
                 pose = _settle(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params, rec)
             else:
                 rec.update(settle_frames=0, settled=None, settle_remedy=None, residual_translation=None,
@@ -180,6 +203,11 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             rec["seconds"]["context"] = time.perf_counter() - t0
             total, turned = window_motion(initial, pose)
             rec.update(displacement=_round(total), rotation_change=_round(turned))
+            if info is not None:
+                moved = float(np.linalg.norm(fa.com_world(pose, info["com"]) - fa.com_world(initial, info["com"])))
+                rec["certificate"] = fa.certificate(
+                    rec["settled"], rec["settle_remedy"] or "none", info["parents"], rec.get("touching", []),
+                    moved, np.degrees(turned), info["flush_angle"], rec.get("reason", ""))
             rec["seconds"] = {k: _round(v, 6) for k, v in rec["seconds"].items()}
             objects[oid] = rec
             if progress is not None:
@@ -190,6 +218,10 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                "sdf_iterations": int(sum(r["sdf_iterations"] for r in objects.values())),
                "settle_frames": int(sum(r["settle_frames"] for r in objects.values())),
                "seconds": _round(time.perf_counter() - t_start, 6)}
+    certs = {o: r["certificate"] for o, r in objects.items() if "certificate" in r}
+    if certs:
+        summary["supporters_lost"] = {o: c["lost"] for o, c in certs.items() if c["lost"]}
+        summary["remedies"] = {o: c["remedy"] for o, c in certs.items() if c["remedy"] in ("damped", "held")}
     if unsettled:
         log.warning("objects that did not meet the settling criterion: %s", ", ".join(unsettled))
     record = {"format": LOG_FORMAT, "order": order, "appended": appended, "params": params.to_dict(),
@@ -239,3 +271,111 @@ def _progress_line(index: int, n: int, oid: str, rec: dict) -> str:
                      f" moved {rec['settle_translation']:.4f} m;")
     parts.append(f"{sum(rec['seconds'].values()):.2f} s")
     return " ".join(parts)
+
+
+def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, poses: dict[str, np.ndarray]) -> dict:
+    """What the faithful stages need about ``oid``: supporters, their normal, resting facets, centre of mass."""
+    import trimesh
+
+    if graph is not None:
+        edges = [e for e in graph.edges if e.target == oid]
+    else:
+        edges = []
+    parents = [e.source for e in edges] or ["ground"]
+    leaning = any(e.relation == "leans_on" for e in edges)
+    below = [e.source for e in edges if e.relation in fa.BELOW] or (["ground"] if not edges else [])
+    mesh = obj.mesh()
+    _, _, scale = decompose(obj.pose)
+    points = np.vstack(proxy.hulls) if proxy is not None and proxy.hulls else np.asarray(mesh.vertices)
+    hull = trimesh.convex.convex_hull(points)
+    com = np.asarray(hull.center_mass, dtype=float)
+    parents_world = {}
+    for p in below:
+        if p == "ground":
+            parents_world[p] = None
+        elif p in poses:
+            parents_world[p] = scene.get(p).mesh().copy().apply_transform(poses[p])
+    world_mesh = hull.copy().apply_transform(np.asarray(obj.pose, dtype=float))
+    up = fa.support_normal(world_mesh, parents_world)
+    flushable = not leaning and bool(below)
+    normals = fa.resting_normals(hull.vertices) if flushable else np.zeros((0, 3))
+    return {"parents": parents, "below": below, "up": up, "normals": normals, "com": com,
+            "flushable": flushable, "flush_angle": 0.0, "diag": float(np.linalg.norm(mesh.extents) * scale)}
+
+
+def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: SimSettings, sp: SettleParams,
+                     fp: FaithfulParams, info: dict, rec: dict) -> np.ndarray:
+    """Guarded settling (see :mod:`phiscene.assembly.faithful`); fills ``rec``; returns the frozen pose."""
+    from phiscene.inertia import rigid_props
+
+    props = rigid_props(mesh, proxy.hulls, sim.density, decompose(pose)[2])
+    world.add_body(oid, proxy.hulls, pose, props)
+    parents = info["parents"]
+
+    def touching() -> list[str]:
+        near = world.distances(oid, [p for p in world.bodies if p != oid], fp.contact_tol)
+        return sorted(near)
+
+    def accept(result_pose) -> tuple[bool, str]:
+        ok, moved, turned = fa.within_bounds(pose, result_pose, info["com"], info["diag"], fp)
+        lost = [p for p in parents if p in world.bodies and p not in touching()]
+        if not ok:
+            return False, f"settling moved it {moved:.3f} m / {turned:.1f} deg"
+        if lost:
+            return False, f"settling lost supporters {lost}"
+        return True, ""
+
+    result = settle_object(world, oid, sp)
+    frames, remedy, reason = result.frames, result.remedy, ""
+    ok, why = accept(result.pose)
+    settled = result.settled
+    final = result.pose
+    if not ok:
+        reason = why
+        world.set_pose(oid, pose)
+        world.set_dynamics(oid, linearDamping=fp.retry_damping, angularDamping=fp.retry_damping,
+                           rollingFriction=fp.retry_rolling_friction, spinningFriction=fp.retry_rolling_friction)
+        damped = settle_object(world, oid, sp)
+        world.restore_dynamics(oid)
+        frames += damped.frames
+        ok, why = accept(damped.pose)
+        if ok:
+            final, remedy = damped.pose, "damped"
+            settled = _verify(world, oid, sp)
+            frames += sp.window
+            world.set_pose(oid, final)
+        else:
+            reason += f"; damped retry: {why}"
+            final, remedy = _lowered(world, oid, pose, [p for p in info["below"] if p in world.bodies]), "held"
+            world.set_pose(oid, final)
+            settled = _verify(world, oid, sp)
+            frames += sp.window
+            world.set_pose(oid, final)
+    rec["touching"] = touching()
+    world.set_static(oid)
+    moved, turned = window_motion(pose, final)
+    rec.update(settle_frames=frames, settled=settled, settle_remedy=remedy,
+               residual_translation=_round(result.residual_translation, 12),
+               residual_rotation=_round(result.residual_rotation, 12),
+               settle_translation=_round(moved), settle_rotation=_round(turned), reason=reason)
+    return final
+
+
+def _verify(world, oid: str, sp: SettleParams) -> bool:
+    """One settling window at normal settings from the current pose (velocity zeroed): criterion met?"""
+    start = world.pose(oid)
+    world.set_pose(oid, start)
+    world.step_frames(sp.window)
+    dt, dr = window_motion(start, world.pose(oid))
+    return dt < sp.eps_pos and dr < sp.eps_rot
+
+
+def _lowered(world, oid: str, pose: np.ndarray, below: list[str]) -> np.ndarray:
+    """``pose`` moved straight down onto the nearest of ``below`` (unchanged when already touching)."""
+    world.set_pose(oid, pose)
+    gaps = world.distances(oid, below, 1.0)
+    gap = min(gaps.values()) if gaps else 0.0
+    out = pose.copy()
+    if gap > 0:
+        out[2, 3] -= gap
+    return out
