@@ -171,6 +171,11 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             if fp.enabled:
                 t0 = time.perf_counter()
                 info = _faithful_info(scene, oid, obj, proxies.get(oid), graph, poses)
+                carrier = next((q for q in info["below"] if q in poses), None)
+                if fp.carry and carrier is not None:
+                    # supported objects move with their supporter: the input arrangement on it is kept
+                    pose = poses[carrier] @ np.linalg.inv(np.asarray(scene.get(carrier).pose, float)) @ pose
+                    rec["carried_by"] = carrier
                 if fp.flush and info["flushable"]:
                     pose, info["flush_angle"] = fa.flush_pose(pose, info["normals"], info["com"],
                                                               info["up"], fp.max_flush_angle)
@@ -206,7 +211,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             if info is not None:
                 moved = float(np.linalg.norm(fa.com_world(pose, info["com"]) - fa.com_world(initial, info["com"])))
                 rec["certificate"] = fa.certificate(
-                    rec["settled"], rec["settle_remedy"] or "none", info["parents"], rec.get("touching", []),
+                    rec["settled"], rec["settle_remedy"] or "none", info["below"], info["leaning"],
+                    rec.get("touching", []),
                     moved, np.degrees(turned), info["flush_angle"], rec.get("reason", ""))
             rec["seconds"] = {k: _round(v, 6) for k, v in rec["seconds"].items()}
             objects[oid] = rec
@@ -299,7 +305,7 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
     up = fa.support_normal(world_mesh, parents_world)
     flushable = not leaning and bool(below)
     normals = fa.resting_normals(hull.vertices) if flushable else np.zeros((0, 3))
-    return {"parents": parents, "below": below, "up": up, "normals": normals, "com": com,
+    return {"parents": parents, "below": below, "leaning": [e.source for e in edges if e.relation == "leans_on"], "up": up, "normals": normals, "com": com,
             "flushable": flushable, "flush_angle": 0.0, "diag": float(np.linalg.norm(mesh.extents) * scale)}
 
 
@@ -311,6 +317,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
     props = rigid_props(mesh, proxy.hulls, sim.density, decompose(pose)[2])
     world.add_body(oid, proxy.hulls, pose, props)
     parents = info["parents"]
+    pose = _lowered(world, oid, pose, [p for p in info["below"] if p in world.bodies], fp.contact_tol / 2)
+    world.set_pose(oid, pose)
 
     def touching() -> list[str]:
         near = world.distances(oid, [p for p in world.bodies if p != oid], fp.contact_tol)
@@ -318,7 +326,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
 
     def accept(result_pose) -> tuple[bool, str]:
         ok, moved, turned = fa.within_bounds(pose, result_pose, info["com"], info["diag"], fp)
-        lost = [p for p in parents if p in world.bodies and p not in touching()]
+        lost = fa.lost_supporters(info["below"], info["leaning"], touching())
         if not ok:
             return False, f"settling moved it {moved:.3f} m / {turned:.1f} deg"
         if lost:
@@ -346,7 +354,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
             world.set_pose(oid, final)
         else:
             reason += f"; damped retry: {why}"
-            final, remedy = _lowered(world, oid, pose, [p for p in info["below"] if p in world.bodies]), "held"
+            final, remedy = pose, "held"
             world.set_pose(oid, final)
             settled = _verify(world, oid, sp)
             frames += sp.window
@@ -370,12 +378,17 @@ def _verify(world, oid: str, sp: SettleParams) -> bool:
     return dt < sp.eps_pos and dr < sp.eps_rot
 
 
-def _lowered(world, oid: str, pose: np.ndarray, below: list[str]) -> np.ndarray:
-    """``pose`` moved straight down onto the nearest of ``below`` (unchanged when already touching)."""
-    world.set_pose(oid, pose)
-    gaps = world.distances(oid, below, 1.0)
-    gap = min(gaps.values()) if gaps else 0.0
+def _lowered(world, oid: str, pose: np.ndarray, below: list[str], clearance: float) -> np.ndarray:
+    """``pose`` moved straight down until within ``clearance`` of the nearest of ``below``.
+
+    Each step lowers by the Euclidean gap (a lower bound of the vertical gap), so it never penetrates.
+    """
     out = pose.copy()
-    if gap > 0:
-        out[2, 3] -= gap
+    for _ in range(8):
+        world.set_pose(oid, out)
+        gaps = world.distances(oid, below, 1.0)
+        gap = min(gaps.values()) if gaps else 0.0
+        if gap <= clearance:
+            break
+        out[2, 3] -= gap - clearance / 2
     return out

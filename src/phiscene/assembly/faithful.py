@@ -14,8 +14,11 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    most ``max_flush_angle``. Small orientation errors are corrected, large
    ones (a plank leaning on purpose) are left alone. Objects with a
    ``leans_on`` parent are never flushed.
-2. **Guarded settling**. After the paper's settling the result is rejected
-   when the centre of mass moved farther than the bound (``max_slide`` or
+2. **Carried and lowered**. An object supported from below first moves
+   with its supporter (``carry``: the supporter's change of pose is applied
+   to it), then is lowered straight down onto its supporters (no free fall).
+3. **Guarded settling**. After the paper's settling the result is rejected
+   when the centre of mass moved (horizontally) farther than the bound (``max_slide`` or
    ``max_slide_frac`` of the object's bounding-box diagonal, the smaller),
    turned more than ``max_turn``, or lost contact with a supporter the graph
    names. A rejected object is reset to its corrected pose and settled again
@@ -23,7 +26,7 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    too it is frozen at its corrected pose lowered onto its supporters
    (``held``), whose static equilibrium is then tested with one settling
    window at normal settings (the certificate's ``settled``).
-3. **A certificate** per object in the assembly log (:func:`certificate`).
+4. **A certificate** per object in the assembly log (:func:`certificate`).
 """
 
 from __future__ import annotations
@@ -58,6 +61,9 @@ class FaithfulParams(Params):
         Same bound as a fraction of the object's bounding-box diagonal (the smaller bound applies).
     max_turn
         Largest rotation accepted from settling (deg).
+    carry
+        Move each object with its (first placed) supporter from below: the supporter's change of pose from
+        its input is applied to the object's input pose first.
     contact_tol
         A supporter counts as kept when the object is within this distance of it at rest (m).
     retry_damping
@@ -74,6 +80,7 @@ class FaithfulParams(Params):
     max_slide: float = 0.03
     max_slide_frac: float = 0.25
     max_turn: float = 10.0
+    carry: bool = True
     contact_tol: float = 0.004
     retry_damping: float = 0.9
     retry_rolling_friction: float = 0.1
@@ -209,15 +216,26 @@ def within_bounds(before: np.ndarray, after: np.ndarray, com_local: np.ndarray, 
 
     Returns
     -------
-    ok, moved (m, centre of mass), turned (deg)
+    ok, moved (m, horizontal centre-of-mass displacement), turned (deg)
     """
-    moved = float(np.linalg.norm(com_world(after, com_local) - com_world(before, com_local)))
+    step = com_world(after, com_local) - com_world(before, com_local)
+    moved = float(np.linalg.norm(step[:2]))  # sliding/rolling; the vertical drop onto the supporter is free
     turned = math.degrees(rotation_angle(decompose(before)[0], decompose(after)[0]))
     bound = min(fp.max_slide, fp.max_slide_frac * diag)
     return moved <= bound and turned <= fp.max_turn, moved, turned
 
 
-def certificate(settled: bool | None, remedy: str, parents: list[str], touching: list[str],
+def lost_supporters(below: list[str], leaning: list[str], touching: list[str]) -> list[str]:
+    """Supporters the object lost at rest: all of ``below`` when it touches none of them, plus untouched ``leaning``.
+
+    An object carried from below needs one of its carriers (the graph may name a table that ``contains`` a
+    jug standing on a plate); each object it leans on must still be touched.
+    """
+    lost = [] if not below or any(p in touching for p in below) else list(below)
+    return lost + [p for p in leaning if p not in touching]
+
+
+def certificate(settled: bool | None, remedy: str, below: list[str], leaning: list[str], touching: list[str],
                 displacement: float, rotation_change_deg: float, flush_angle: float,
                 reason: str = "") -> dict:
     """Per-object certificate for the assembly log.
@@ -229,8 +247,8 @@ def certificate(settled: bool | None, remedy: str, parents: list[str], touching:
     remedy
         What produced the final pose: ``none``, ``extra_frames``, ``damping`` (the paper's remedies),
         ``damped`` (faithful retry), ``held`` (frozen at the corrected pose), ``attached``.
-    parents
-        The graph's supporters of the object.
+    below, leaning
+        The graph's supporters of the object from below (``supports``, ``contains``) and those it leans on.
     touching
         Objects (``ground`` included) within ``contact_tol`` of it at rest.
     displacement, rotation_change_deg
@@ -240,8 +258,8 @@ def certificate(settled: bool | None, remedy: str, parents: list[str], touching:
     reason
         Why a remedy beyond the paper's was needed.
     """
-    lost = [p for p in parents if p not in touching]
-    return {"settled": settled, "remedy": remedy, "supporters": list(parents), "touching": sorted(touching),
+    lost = lost_supporters(below, leaning, touching)
+    return {"settled": settled, "remedy": remedy, "supporters": list(below) + list(leaning), "touching": sorted(touching),
             "supporters_kept": not lost, "lost": lost, "displacement": round(float(displacement), 9),
             "rotation_change": round(float(rotation_change_deg), 6), "flush_angle": round(float(flush_angle), 6),
             "reason": reason}
