@@ -324,8 +324,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         near = world.distances(oid, [p for p in world.bodies if p != oid], fp.contact_tol)
         return sorted(near)
 
-    def accept(result_pose) -> tuple[bool, str]:
-        ok, moved, turned = fa.within_bounds(pose, result_pose, info["com"], info["diag"], fp)
+    def accept(result_pose, start=None) -> tuple[bool, str]:
+        ok, moved, turned = fa.within_bounds(pose if start is None else start, result_pose, info["com"], info["diag"], fp)
         lost = fa.lost_supporters(info["below"], info["leaning"], touching())
         if not ok:
             return False, f"settling moved it {moved:.3f} m / {turned:.1f} deg"
@@ -340,6 +340,20 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
     final = result.pose
     if not ok:
         reason = why
+        # remedy "stable": the nearest stable resting pose within max_stable_angle, lowered, settled normally
+        start, angle = fa.flush_pose(pose, info["normals"], info["com"], info["up"], fp.max_stable_angle)
+        if angle > 0:
+            start = _lowered(world, oid, start, [p for p in info["below"] if p in world.bodies], fp.contact_tol / 2)
+            world.set_pose(oid, start)
+            stable = settle_object(world, oid, sp)
+            frames += stable.frames
+            ok, why = accept(stable.pose, start)
+            if ok and stable.settled:
+                final, remedy, settled = stable.pose, "stable", True
+            else:
+                reason += f"; stable pose {angle:.1f} deg away: {why or 'not settled'}"
+                ok = False
+    if not ok:
         world.set_pose(oid, pose)
         world.set_dynamics(oid, linearDamping=fp.retry_damping, angularDamping=fp.retry_damping,
                            rollingFriction=fp.retry_rolling_friction, spinningFriction=fp.retry_rolling_friction)

@@ -21,7 +21,9 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    when the centre of mass moved (horizontally) farther than the bound (``max_slide`` or
    ``max_slide_frac`` of the object's bounding-box diagonal, the smaller),
    turned more than ``max_turn``, or lost contact with a supporter the graph
-   names. A rejected object is reset to its corrected pose and settled again
+   names. A rejected object is restarted from its nearest stable resting
+   pose within ``max_stable_angle`` (``stable``, accepted only if it settles
+   within the bounds); else reset to its corrected pose and settled again
    with high damping and rolling friction (``damped``); if that is rejected
    too it is frozen at its corrected pose lowered onto its supporters
    (``held``), whose static equilibrium is then tested with one settling
@@ -64,6 +66,9 @@ class FaithfulParams(Params):
     carry
         Move each object with its (first placed) supporter from below: the supporter's change of pose from
         its input is applied to the object's input pose first.
+    max_stable_angle
+        Remedy ``stable``: a rejected object is restarted from its nearest stable resting pose when that is
+        within this angle (deg) of its pose.
     contact_tol
         A supporter counts as kept when the object is within this distance of it at rest (m).
     retry_damping
@@ -81,13 +86,14 @@ class FaithfulParams(Params):
     max_slide_frac: float = 0.25
     max_turn: float = 10.0
     carry: bool = True
+    max_stable_angle: float = 45.0
     contact_tol: float = 0.004
     retry_damping: float = 0.9
     retry_rolling_friction: float = 0.1
 
     def check(self) -> None:
         """Reject negative bounds and ``retry_damping`` outside [0, 1) (``ValueError``)."""
-        for key in ("max_flush_angle", "max_slide", "max_slide_frac", "max_turn", "contact_tol",
+        for key in ("max_flush_angle", "max_stable_angle", "max_slide", "max_slide_frac", "max_turn", "contact_tol",
                     "retry_rolling_friction"):
             if getattr(self, key) < 0:
                 raise ValueError(f"faithful parameter {key!r} must be >= 0, got {getattr(self, key)}")
@@ -246,7 +252,7 @@ def certificate(settled: bool | None, remedy: str, below: list[str], leaning: li
         Whether the final pose met the settling criterion.
     remedy
         What produced the final pose: ``none``, ``extra_frames``, ``damping`` (the paper's remedies),
-        ``damped`` (faithful retry), ``held`` (frozen at the corrected pose), ``attached``.
+        ``stable``, ``damped`` (faithful retries), ``held`` (frozen at the corrected pose), ``attached``.
     below, leaning
         The graph's supporters of the object from below (``supports``, ``contains``) and those it leans on.
     touching
