@@ -316,7 +316,6 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
 
     props = rigid_props(mesh, proxy.hulls, sim.density, decompose(pose)[2])
     world.add_body(oid, proxy.hulls, pose, props)
-    parents = info["parents"]
     pose = _lowered(world, oid, pose, [p for p in info["below"] if p in world.bodies], fp.contact_tol / 2)
     world.set_pose(oid, pose)
 
