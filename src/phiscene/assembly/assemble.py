@@ -323,9 +323,14 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         near = world.distances(oid, [p for p in world.bodies if p != oid], fp.contact_tol)
         return sorted(near)
 
-    def accept(result_pose, start=None) -> tuple[bool, str]:
+    loose: list[tuple[float, np.ndarray]] = []  # settled results kept on their supporters within max_roll
+
+    def accept(result_pose, start=None, settled_now=False) -> tuple[bool, str]:
         ok, moved, turned = fa.within_bounds(pose if start is None else start, result_pose, info["com"], info["diag"], fp)
         lost = fa.lost_supporters(info["below"], info["leaning"], touching())
+        shift = float(np.linalg.norm((fa.com_world(result_pose, info["com"]) - fa.com_world(pose, info["com"]))[:2]))
+        if settled_now and not lost and shift <= fp.max_roll:
+            loose.append((shift, result_pose))
         if not ok:
             return False, f"settling moved it {moved:.3f} m / {turned:.1f} deg"
         if lost:
@@ -334,7 +339,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
 
     result = settle_object(world, oid, sp)
     frames, remedy, reason = result.frames, result.remedy, ""
-    ok, why = accept(result.pose)
+    ok, why = accept(result.pose, settled_now=result.settled)
     settled = result.settled
     final = result.pose
     if not ok:
@@ -346,12 +351,17 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
             world.set_pose(oid, start)
             stable = settle_object(world, oid, sp)
             frames += stable.frames
-            ok, why = accept(stable.pose, start)
+            ok, why = accept(stable.pose, start, settled_now=stable.settled)
             if ok and stable.settled:
                 final, remedy, settled = stable.pose, "stable", True
             else:
                 reason += f"; stable pose {angle:.1f} deg away: {why or 'not settled'}"
                 ok = False
+    if not ok and loose:
+        # remedy "rolled": the settled result closest to the input among those that stayed on their supporters
+        final = min(loose, key=lambda c: c[0])[1]
+        remedy, settled, ok = "rolled", True, True
+        world.set_pose(oid, final)
     if not ok:
         world.set_pose(oid, pose)
         world.set_dynamics(oid, linearDamping=fp.retry_damping, angularDamping=fp.retry_damping,

@@ -23,7 +23,8 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    turned more than ``max_turn``, or lost contact with a supporter the graph
    names. A rejected object is restarted from its nearest stable resting
    pose within ``max_stable_angle`` (``stable``, accepted only if it settles
-   within the bounds); else reset to its corrected pose and settled again
+   within the bounds); else the settled result of either that kept its
+   supporters and rolled at most ``max_roll`` (``rolled``); else reset to its corrected pose and settled again
    with high damping and rolling friction (``damped``); if that is rejected
    too it is frozen at its corrected pose lowered onto its supporters
    (``held``), whose static equilibrium is then tested with one settling
@@ -69,6 +70,9 @@ class FaithfulParams(Params):
     max_stable_angle
         Remedy ``stable``: a rejected object is restarted from its nearest stable resting pose when that is
         within this angle (deg) of its pose.
+    max_roll
+        Remedy ``rolled``: when both fail, the settled result (of either) that kept its supporters and whose
+        centre of mass moved at most this far horizontally (m) is taken, the closest to the input.
     contact_tol
         A supporter counts as kept when the object is within this distance of it at rest (m).
     retry_damping
@@ -87,13 +91,14 @@ class FaithfulParams(Params):
     max_turn: float = 10.0
     carry: bool = True
     max_stable_angle: float = 45.0
+    max_roll: float = 0.08
     contact_tol: float = 0.004
     retry_damping: float = 0.9
     retry_rolling_friction: float = 0.1
 
     def check(self) -> None:
         """Reject negative bounds and ``retry_damping`` outside [0, 1) (``ValueError``)."""
-        for key in ("max_flush_angle", "max_stable_angle", "max_slide", "max_slide_frac", "max_turn", "contact_tol",
+        for key in ("max_flush_angle", "max_stable_angle", "max_roll", "max_slide", "max_slide_frac", "max_turn", "contact_tol",
                     "retry_rolling_friction"):
             if getattr(self, key) < 0:
                 raise ValueError(f"faithful parameter {key!r} must be >= 0, got {getattr(self, key)}")
@@ -252,7 +257,7 @@ def certificate(settled: bool | None, remedy: str, below: list[str], leaning: li
         Whether the final pose met the settling criterion.
     remedy
         What produced the final pose: ``none``, ``extra_frames``, ``damping`` (the paper's remedies),
-        ``stable``, ``damped`` (faithful retries), ``held`` (frozen at the corrected pose), ``attached``.
+        ``stable``, ``rolled``, ``damped`` (faithful retries), ``held`` (frozen at the corrected pose), ``attached``.
     below, leaning
         The graph's supporters of the object from below (``supports``, ``contains``) and those it leans on.
     touching
