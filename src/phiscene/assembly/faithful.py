@@ -91,7 +91,7 @@ class FaithfulParams(Params):
     max_turn: float = 10.0
     carry: bool = True
     max_stable_angle: float = 45.0
-    max_roll: float = 0.08
+    max_roll: float = 0.1
     contact_tol: float = 0.004
     retry_damping: float = 0.9
     retry_rolling_friction: float = 0.1
