@@ -3,20 +3,28 @@
 usage: python benchmarks/faithful/compare.py SCENE_JSON [proxy_backend|convex] [GT_SCENE_JSON|-] [TOPOLOGY_JSON]
 Environment: FAITHFUL='{"max_flush_angle": 10}' overrides assembly.faithful keys. Logs go to /tmp/faithful_viga/.
 Not a timed benchmark: seconds are warm, on whatever load the machine has."""
-import sys, time, json, yaml, numpy as np, torch, logging
+import json
+import sys
+import time
 from pathlib import Path
+
+import torch
+import yaml
+
 torch.set_num_threads(1)
-from phiscene.scene import load_scene
 from phiscene import topology
-from phiscene.proxies import ProxyParams, scene_proxies
 from phiscene.assembly import AssemblyParams, ground_scene
-from phiscene.sim.settings import SimSettings
 from phiscene.metrics.physical import PhysicalParams, physical_metrics
-from phiscene.sim.mujoco import drift_mujoco, MujocoParams
 from phiscene.metrics.pose import pose_metrics
+from phiscene.proxies import ProxyParams, scene_proxies
+from phiscene.scene import load_scene
+from phiscene.sim.mujoco import MujocoParams, drift_mujoco
+from phiscene.sim.settings import SimSettings
+
 ROOT = Path(__file__).resolve().parents[2]
 cfg = yaml.safe_load(open(ROOT / "config/config.yaml"))
 import os
+
 cfg["assembly"]["faithful"].update(json.loads(os.environ.get("FAITHFUL", "{}")))
 path = Path(sys.argv[1]); backend = sys.argv[2] if len(sys.argv) > 2 else "convex"
 gt = load_scene(sys.argv[3]) if len(sys.argv) > 3 and sys.argv[3] != "-" else None
@@ -43,7 +51,6 @@ def show(name, s, secs, rec=None):
     if gt is not None:
         r.update({k: pm[k] for k in pm if k.startswith("gt_") and k.endswith("mean")})
     if rec is not None:
-        c = [o for o, v in rec["objects"].items() if "certificate" in v]
         r["unsettled"] = rec["summary"]["unsettled"]
         r["lost"] = rec["summary"].get("supporters_lost"); r["remedies"] = rec["summary"].get("remedies")
     rows[name] = r

@@ -5,10 +5,17 @@ Reads /work/data/REST3D/assets/SCENE/{sam3d,ours}/meshes/*.glb (CC BY-NC: never 
 with REST3D's rotation (Kabsch between the object centres of sam3d/ and ours/), Y-up -> Z-up, lowest point at z = 0;
 with `tl`, also rotates the scene so the largest object's nearest resting facet faces down. Writes
 /tmp/faithful_viga/SCENE[_tl]/scene.json. Stands in for the real-scenes importer until it lands."""
-import sys, glob, os, numpy as np, trimesh
+import glob
+import os
+import sys
+
+import numpy as np
+import trimesh
+
+from phiscene.metrics.pose import rigid_alignment
 from phiscene.scene import Scene, SceneObject, save_scene
 from phiscene.transforms import make_pose
-from phiscene.metrics.pose import rigid_alignment
+
 name = sys.argv[1] if len(sys.argv) > 1 else "custom_viga"
 root = f"/work/data/REST3D/assets/{name}"
 table_level = len(sys.argv) > 2
@@ -27,7 +34,7 @@ yup = np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]], float)  # Y-up -> Z-up
 M = yup @ R
 verts = {i: sam[i].vertices @ M.T for i in ids}
 if table_level:  # level by the resting facet of the largest object (the table), nearest to the current down
-    from phiscene.assembly.faithful import resting_normals, _rotation_between
+    from phiscene.assembly.faithful import _rotation_between, resting_normals
     big = max(ids, key=lambda i: np.ptp(verts[i], axis=0).prod())
     n = resting_normals(verts[big]); k = int(np.argmax(n @ [0, 0, -1.0]))
     Q = _rotation_between(n[k] / np.linalg.norm(n[k]), np.array([0, 0, -1.0]))
