@@ -40,11 +40,11 @@ def time_scene(scene_path: Path, cfg: dict, cache: Path) -> dict:
     proxies = scene_proxies(scene, ProxyParams.from_dict(cfg["proxies"]), cache)
     params, sim = AssemblyParams.from_dict(cfg["assembly"]), SimSettings.from_dict(cfg["sim"])
     graph = topology.infer(scene, "geometric", cfg["topology"].get("geometric", {}))
-    ground_scene(scene, graph.order, proxies, params, sim, cache)  # warm: SDF grids, hull files, imports
+    ground_scene(scene, graph.order, proxies, params, sim, cache, graph=graph)  # warm: SDF grids, hull files, imports
     t0 = time.perf_counter()
     graph = topology.infer(scene, "geometric", cfg["topology"].get("geometric", {}))
     t_topo = time.perf_counter() - t0
-    _, rec = ground_scene(scene, graph.order, proxies, params, sim, cache)
+    _, rec = ground_scene(scene, graph.order, proxies, params, sim, cache, graph=graph)
     objs = rec["objects"].values() if isinstance(rec["objects"], dict) else rec["objects"]
     sdf = sum(o["seconds"].get("sdf", 0.0) for o in objs)
     settle = sum(o["seconds"].get("settle", 0.0) for o in objs)

@@ -64,7 +64,7 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
     fixed.update({o.id: o.attached for o in scene.objects if o.attached is not None})
     settled, record = ground_scene(scene, graph.order, proxies, AssemblyParams.from_dict(assembly),
                                    SimSettings.from_dict(sim), Path(cache_dir), progress=progress or log.info,
-                                   attached=fixed)
+                                   graph=graph, attached=fixed)
     record["topology"] = str(topology_path)
     write_json(out_log, record)
     save_scene(settled, out_scene)

@@ -20,6 +20,8 @@ from typing import Callable
 
 import numpy as np
 
+from phiscene.assembly import faithful as fa
+from phiscene.assembly.faithful import FaithfulParams
 from phiscene.assembly.penetration import PenetrationParams, SdfBody, resolve_penetration, sdf_body
 from phiscene.assembly.settle import SettleParams, settle_object, window_motion
 from phiscene.errors import InputError
@@ -49,6 +51,8 @@ class AssemblyParams(Params):
         See :class:`~phiscene.assembly.penetration.PenetrationParams`.
     settle_params
         See :class:`~phiscene.assembly.settle.SettleParams`.
+    faithful
+        See :class:`~phiscene.assembly.faithful.FaithfulParams` (off: the paper's loop exactly).
     """
 
     _label = "assembly parameters"
@@ -57,6 +61,7 @@ class AssemblyParams(Params):
     settle: bool = True
     penetration_params: PenetrationParams = field(default_factory=PenetrationParams)
     settle_params: SettleParams = field(default_factory=SettleParams)
+    faithful: FaithfulParams = field(default_factory=FaithfulParams)
 
     def check(self) -> None:
         """Reject ``penetration`` / ``settle`` switches that are not booleans (``ValueError``)."""
@@ -101,7 +106,7 @@ def _round(v, digits: int = 9) -> float | None:
 
 def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], params: AssemblyParams,
                  sim: SimSettings, cache_dir: Path, progress: Callable[[str], None] | None = None,
-                 attached: dict[str, str] | None = None) -> tuple[Scene, dict]:
+                 graph=None, attached: dict[str, str] | None = None) -> tuple[Scene, dict]:
     """Physically ground a scene by topology-ordered penetration resolution and settling.
 
     Parameters
@@ -124,6 +129,9 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         Objects fixed in place (id -> what holds them, :attr:`phiscene.scene.SceneObject.attached`): placed first,
         static at their input pose (never moved, settled or dropped), context for the others; the result
         carries the attachment.
+    graph
+        The support graph (:class:`~phiscene.topology.graph.SupportGraph`) whose supporters the faithful
+        variant keeps; without it every object is taken to stand on the ground.
 
     Returns
     -------
@@ -135,7 +143,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         ``sdf_context``, ``sdf_grid_error`` (max grid error near the surface, m), ``settle_frames``,
         ``settled``, ``settle_remedy``, ``residual_translation``, ``residual_rotation``,
         ``settle_translation``, ``settle_rotation``, ``displacement``, ``rotation_change``, ``seconds`` per
-        stage) and a ``summary``.
+        stage) and a ``summary``; with ``params.faithful.enabled`` also ``flush_angle`` and a
+        ``certificate`` per object (:func:`~phiscene.assembly.faithful.certificate`).
     """
     from phiscene.sim.bullet import BulletWorld
 
@@ -171,6 +180,22 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                     progress(f"[{index + 1}/{len(order)}] {oid}: attached to {attached[oid]}, kept in place")
                 continue
 
+            fp = params.faithful
+            info = None
+            if fp.enabled:
+                t0 = time.perf_counter()
+                info = _faithful_info(scene, oid, obj, proxies.get(oid), graph, poses)
+                carrier = next((q for q in info["below"] if q in poses), None)
+                if fp.carry and carrier is not None:
+                    # supported objects move with their supporter: the input arrangement on it is kept
+                    pose = poses[carrier] @ np.linalg.inv(np.asarray(scene.get(carrier).pose, float)) @ pose
+                    rec["carried_by"] = carrier
+                if fp.flush and info["flushable"]:
+                    pose, info["flush_angle"] = fa.flush_pose(pose, info["normals"], info["com"],
+                                                              info["up"], fp.max_flush_angle)
+                rec["flush_angle"] = _round(info["flush_angle"])
+                rec["seconds"]["flush"] = time.perf_counter() - t0
+
             t0 = time.perf_counter()
             if params.penetration:
                 pose = _resolve(oid, obj.mesh(), pose, placed, scene.ground_height, pp, cache_dir, rec)
@@ -180,7 +205,10 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             rec["seconds"]["sdf"] = time.perf_counter() - t0
 
             t0 = time.perf_counter()
-            if params.settle:
+            if params.settle and info is not None:
+                pose = _settle_faithful(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params,
+                                        fp, info, rec)
+            elif params.settle:
                 pose = _settle(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params, rec)
             else:
                 rec.update(settle_frames=0, settled=None, settle_remedy=None, residual_translation=None,
@@ -194,6 +222,12 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             rec["seconds"]["context"] = time.perf_counter() - t0
             total, turned = window_motion(initial, pose)
             rec.update(displacement=_round(total), rotation_change=_round(turned))
+            if info is not None:
+                moved = float(np.linalg.norm(fa.com_world(pose, info["com"]) - fa.com_world(initial, info["com"])))
+                rec["certificate"] = fa.certificate(
+                    rec["settled"], rec["settle_remedy"] or "none", info["below"], info["leaning"],
+                    rec.get("touching", []),
+                    moved, np.degrees(turned), info["flush_angle"], rec.get("reason", ""))
             rec["seconds"] = {k: _round(v, 6) for k, v in rec["seconds"].items()}
             objects[oid] = rec
             if progress is not None:
@@ -204,6 +238,10 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                "sdf_iterations": int(sum(r["sdf_iterations"] for r in objects.values())),
                "settle_frames": int(sum(r["settle_frames"] for r in objects.values())),
                "seconds": _round(time.perf_counter() - t_start, 6)}
+    certs = {o: r["certificate"] for o, r in objects.items() if "certificate" in r}
+    if certs:
+        summary["supporters_lost"] = {o: c["lost"] for o, c in certs.items() if c["lost"]}
+        summary["remedies"] = {o: c["remedy"] for o, c in certs.items() if c["remedy"] in ("damped", "held")}
     if unsettled:
         log.warning("objects that did not meet the settling criterion: %s", ", ".join(unsettled))
     summary["attached"] = sorted(attached)
@@ -271,3 +309,141 @@ def _progress_line(index: int, n: int, oid: str, rec: dict) -> str:
                      f" moved {rec['settle_translation']:.4f} m;")
     parts.append(f"{sum(rec['seconds'].values()):.2f} s")
     return " ".join(parts)
+
+
+def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, poses: dict[str, np.ndarray]) -> dict:
+    """What the faithful stages need about ``oid``: supporters, their normal, resting facets, centre of mass."""
+    import trimesh
+
+    if graph is not None:
+        edges = [e for e in graph.edges if e.target == oid]
+    else:
+        edges = []
+    parents = [e.source for e in edges] or ["ground"]
+    leaning = any(e.relation == "leans_on" for e in edges)
+    below = [e.source for e in edges if e.relation in fa.BELOW] or (["ground"] if not edges else [])
+    mesh = obj.mesh()
+    _, _, scale = decompose(obj.pose)
+    points = np.vstack(proxy.hulls) if proxy is not None and proxy.hulls else np.asarray(mesh.vertices)
+    hull = trimesh.convex.convex_hull(points)
+    com = np.asarray(hull.center_mass, dtype=float)
+    parents_world = {}
+    for p in below:
+        if p == "ground":
+            parents_world[p] = None
+        elif p in poses:
+            parents_world[p] = scene.get(p).mesh().copy().apply_transform(poses[p])
+    world_mesh = hull.copy().apply_transform(np.asarray(obj.pose, dtype=float))
+    up = fa.support_normal(world_mesh, parents_world)
+    flushable = not leaning and bool(below)
+    normals = fa.resting_normals(hull.vertices) if flushable else np.zeros((0, 3))
+    return {"parents": parents, "below": below, "leaning": [e.source for e in edges if e.relation == "leans_on"], "up": up, "normals": normals, "com": com,
+            "flushable": flushable, "flush_angle": 0.0, "diag": float(np.linalg.norm(mesh.extents) * scale)}
+
+
+def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: SimSettings, sp: SettleParams,
+                     fp: FaithfulParams, info: dict, rec: dict) -> np.ndarray:
+    """Guarded settling (see :mod:`phiscene.assembly.faithful`); fills ``rec``; returns the frozen pose."""
+    from phiscene.inertia import rigid_props
+
+    props = rigid_props(mesh, proxy.hulls, sim.density, decompose(pose)[2])
+    world.add_body(oid, proxy.hulls, pose, props)
+    pose = _lowered(world, oid, pose, [p for p in info["below"] if p in world.bodies], fp.contact_tol / 2)
+    world.set_pose(oid, pose)
+
+    def touching() -> list[str]:
+        near = world.distances(oid, [p for p in world.bodies if p != oid], fp.contact_tol)
+        return sorted(near)
+
+    loose: list[tuple[float, np.ndarray]] = []  # settled results kept on their supporters within max_roll
+
+    def accept(result_pose, start=None, settled_now=False) -> tuple[bool, str]:
+        ok, moved, turned = fa.within_bounds(pose if start is None else start, result_pose, info["com"], info["diag"], fp)
+        lost = fa.lost_supporters(info["below"], info["leaning"], touching())
+        shift = float(np.linalg.norm((fa.com_world(result_pose, info["com"]) - fa.com_world(pose, info["com"]))[:2]))
+        if settled_now and not lost and shift <= fp.max_roll:
+            loose.append((shift, result_pose))
+        if not ok:
+            return False, f"settling moved it {moved:.3f} m / {turned:.1f} deg"
+        if lost:
+            return False, f"settling lost supporters {lost}"
+        return True, ""
+
+    result = settle_object(world, oid, sp)
+    frames, remedy, reason = result.frames, result.remedy, ""
+    ok, why = accept(result.pose, settled_now=result.settled)
+    settled = result.settled
+    final = result.pose
+    if not ok:
+        reason = why
+        # remedy "stable": the nearest stable resting pose within max_stable_angle, lowered, settled normally
+        start, angle = fa.flush_pose(pose, info["normals"], info["com"], info["up"], fp.max_stable_angle)
+        if angle > 0:
+            start = _lowered(world, oid, start, [p for p in info["below"] if p in world.bodies], fp.contact_tol / 2)
+            world.set_pose(oid, start)
+            stable = settle_object(world, oid, sp)
+            frames += stable.frames
+            ok, why = accept(stable.pose, start, settled_now=stable.settled)
+            if ok and stable.settled:
+                final, remedy, settled = stable.pose, "stable", True
+            else:
+                reason += f"; stable pose {angle:.1f} deg away: {why or 'not settled'}"
+                ok = False
+    if not ok and loose:
+        # remedy "rolled": the settled result closest to the input among those that stayed on their supporters
+        final = min(loose, key=lambda c: c[0])[1]
+        remedy, settled, ok = "rolled", True, True
+        world.set_pose(oid, final)
+    if not ok:
+        world.set_pose(oid, pose)
+        world.set_dynamics(oid, linearDamping=fp.retry_damping, angularDamping=fp.retry_damping,
+                           rollingFriction=fp.retry_rolling_friction, spinningFriction=fp.retry_rolling_friction)
+        damped = settle_object(world, oid, sp)
+        world.restore_dynamics(oid)
+        frames += damped.frames
+        ok, why = accept(damped.pose)
+        if ok:
+            final, remedy = damped.pose, "damped"
+            settled = _verify(world, oid, sp)
+            frames += sp.window
+            world.set_pose(oid, final)
+        else:
+            reason += f"; damped retry: {why}"
+            final, remedy = pose, "held"
+            world.set_pose(oid, final)
+            settled = _verify(world, oid, sp)
+            frames += sp.window
+            world.set_pose(oid, final)
+    rec["touching"] = touching()
+    world.set_static(oid)
+    moved, turned = window_motion(pose, final)
+    rec.update(settle_frames=frames, settled=settled, settle_remedy=remedy,
+               residual_translation=_round(result.residual_translation, 12),
+               residual_rotation=_round(result.residual_rotation, 12),
+               settle_translation=_round(moved), settle_rotation=_round(turned), reason=reason)
+    return final
+
+
+def _verify(world, oid: str, sp: SettleParams) -> bool:
+    """One settling window at normal settings from the current pose (velocity zeroed): criterion met?"""
+    start = world.pose(oid)
+    world.set_pose(oid, start)
+    world.step_frames(sp.window)
+    dt, dr = window_motion(start, world.pose(oid))
+    return dt < sp.eps_pos and dr < sp.eps_rot
+
+
+def _lowered(world, oid: str, pose: np.ndarray, below: list[str], clearance: float) -> np.ndarray:
+    """``pose`` moved straight down until within ``clearance`` of the nearest of ``below``.
+
+    Each step lowers by the Euclidean gap (a lower bound of the vertical gap), so it never penetrates.
+    """
+    out = pose.copy()
+    for _ in range(8):
+        world.set_pose(oid, out)
+        gaps = world.distances(oid, below, 1.0)
+        gap = min(gaps.values()) if gaps else 0.0
+        if gap <= clearance:
+            break
+        out[2, 3] -= gap - clearance / 2
+    return out

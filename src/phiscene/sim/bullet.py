@@ -293,3 +293,31 @@ class BulletWorld:
             key = (names.get(c[1], str(c[1])), names.get(c[2], str(c[2])))
             out[key] = out.get(key, 0.0) + f
         return out
+
+    # -- faithful grounding helpers ------------------------------------------------
+    def set_dynamics(self, name: str, **kwargs) -> None:
+        """Change pybullet dynamics of body ``name`` (``linearDamping``, ``rollingFriction``, ...)."""
+        import pybullet as p
+
+        p.changeDynamics(self.bodies[name].uid, -1, physicsClientId=self.client, **kwargs)
+
+    def restore_dynamics(self, name: str) -> None:
+        """Reset the friction and damping of body ``name`` to the world's settings."""
+        self._surface(self.bodies[name].uid)
+
+    def distances(self, name: str, others: list[str], max_distance: float) -> dict[str, float]:
+        """Smallest signed distance (m) from body ``name`` to each of ``others`` within ``max_distance``.
+
+        Bodies farther than ``max_distance`` (or not in the world) are left out.
+        """
+        import pybullet as p
+
+        out: dict[str, float] = {}
+        a = self.bodies[name].uid
+        for o in others:
+            if o not in self.bodies:
+                continue
+            pts = p.getClosestPoints(a, self.bodies[o].uid, max_distance, physicsClientId=self.client)
+            if pts:
+                out[o] = float(min(c[8] for c in pts))
+        return out

@@ -1,0 +1,185 @@
+"""Faithful grounding (phiscene.assembly.faithful) and pose metrics (phiscene.metrics.pose).
+
+Oracles: box geometry (a face flush with a level table has a vertical normal),
+statics (a centre of mass over the support stays on it), and closed-form
+rigid motions for the pose metrics.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+from scipy.spatial.transform import Rotation
+
+from phiscene.assembly import AssemblyParams, ground_scene
+from phiscene.assembly.faithful import flush_pose, resting_normals
+from phiscene.meshes import save_mesh
+from phiscene.metrics.pose import pose_metrics
+from phiscene.proxies import ProxyParams, scene_proxies
+from phiscene.scene import Scene, SceneObject
+from phiscene.sim.settings import SimSettings
+from phiscene.topology.graph import SupportEdge, SupportGraph
+from phiscene.transforms import decompose, make_pose
+
+torch.set_num_threads(1)
+SIM = SimSettings()
+FAITHFUL = {"faithful": {"enabled": True}}
+
+
+@pytest.fixture(scope="module")
+def work(tmp_path_factory):
+    root = tmp_path_factory.mktemp("faithful")
+    fruit = trimesh.creation.icosphere(subdivisions=2, radius=0.04)
+    fruit.apply_scale([1.0, 1.0, 0.9])
+    meshes = {"table": trimesh.creation.box((0.8, 0.8, 0.1)), "box": trimesh.creation.box((0.1, 0.1, 0.1)),
+              "block": trimesh.creation.box((0.2, 0.1, 0.05)), "plank": trimesh.creation.box((0.5, 0.05, 0.02)),
+              "fruit": fruit}
+    return {"root": root, "cache": root / "cache",
+            "meshes": {n: save_mesh(m, root / f"{n}.obj") for n, m in meshes.items()}}
+
+
+def scene_of(work, placements):
+    return Scene([SceneObject(oid, work["meshes"][name], pose) for oid, (name, pose) in placements.items()])
+
+
+def graph_of(scene, edges):
+    es = [SupportEdge(a, b, rel) for a, b, rel in edges]
+    return SupportGraph(objects=scene.ids, edges=es, order=scene.ids)
+
+
+def run(work, scene, graph, params=FAITHFUL):
+    proxies = scene_proxies(scene, ProxyParams(backend="convex"), work["cache"])
+    return ground_scene(scene, graph.order, proxies, AssemblyParams.from_dict(params), SIM, work["cache"],
+                        graph=graph)
+
+
+TABLE = make_pose(translation=(0, 0, 0.05))
+
+
+def test_tilted_box_ends_flush_near_its_input(work):
+    R = Rotation.from_euler("xy", [8, 3], degrees=True).as_matrix()
+    half = 0.05
+    lowest = half * (abs(R[2]).sum())  # lowest corner of the tilted cube touches the table top
+    pose = make_pose(R, (0.1, -0.05, 0.1 + lowest))
+    scene = scene_of(work, {"table": ("table", TABLE), "box": ("box", pose)})
+    g = graph_of(scene, [("ground", "table", "supports"), ("table", "box", "supports")])
+    out, rec = run(work, scene, g)
+    Rb, tb, _ = decompose(out.get("box").pose)
+    # some face normal of the cube is vertical within 0.5 deg
+    tilt = min(math.degrees(math.acos(min(1.0, abs(Rb[2, k])))) for k in range(3))
+    assert tilt < 0.5
+    assert np.linalg.norm(tb - pose[:3, 3]) < 0.01
+    cert = rec["objects"]["box"]["certificate"]
+    assert cert["settled"] and cert["supporters_kept"] and "table" in cert["touching"]
+
+
+def test_fruit_above_table_stays_and_settles(work):
+    pose = make_pose(Rotation.from_euler("x", 4, degrees=True).as_matrix(), (0.2, 0.1, 0.1 + 0.036 + 0.005))
+    scene = scene_of(work, {"table": ("table", TABLE), "fruit": ("fruit", pose)})
+    g = graph_of(scene, [("ground", "table", "supports"), ("table", "fruit", "supports")])
+    out, rec = run(work, scene, g)
+    assert np.linalg.norm(out.get("fruit").pose[:3, 3] - pose[:3, 3]) < 0.01
+    cert = rec["objects"]["fruit"]["certificate"]
+    assert cert["settled"] and cert["supporters_kept"]
+
+
+def test_block_off_the_edge_stays_on_its_parent(work):
+    # block 0.2 long, its centre 2 cm inside the table edge (x = 0.4): the table carries it
+    pose = make_pose(Rotation.from_euler("y", 6, degrees=True).as_matrix(), (0.38, 0.0, 0.1 + 0.025 + 0.012))
+    scene = scene_of(work, {"table": ("table", TABLE), "block": ("block", pose)})
+    g = graph_of(scene, [("ground", "table", "supports"), ("table", "block", "supports")])
+    out, rec = run(work, scene, g)
+    assert out.get("block").world_mesh().bounds[0, 2] > 0.09  # on the table top (0.1), not the floor
+    cert = rec["objects"]["block"]["certificate"]
+    assert cert["supporters_kept"] and cert["displacement"] < 0.03
+
+
+def test_leaning_plank_keeps_both_supporters(work):
+    # a plank at 30 deg: lower end on the ground, lower face resting on the box's top edge (x=-0.05, z=0.1)
+    th = math.radians(30)
+    L, T = 0.5, 0.02
+    d = np.array([math.cos(th), 0.0, math.sin(th)])
+    below = np.array([math.sin(th), 0.0, -math.cos(th)])  # lower-face normal
+    edge = np.array([-0.05, 0.0, 0.1])
+    s_contact = 0.1 / math.sin(th) - L / 2  # centre-to-contact distance along d for the lower corner at z = 0
+    c = edge - T / 2 * below - s_contact * d + np.array([0, 0, 0.001])
+    pose = make_pose(Rotation.from_euler("y", -30, degrees=True).as_matrix(), c)
+    box_pose = make_pose(translation=(0.0, 0.0, 0.05))
+    scene = scene_of(work, {"box": ("box", box_pose), "plank": ("plank", pose)})
+    g = graph_of(scene, [("ground", "box", "supports"), ("ground", "plank", "supports"),
+                         ("box", "plank", "leans_on")])
+    _, rec = run(work, scene, g)
+    cert = rec["objects"]["plank"]["certificate"]
+    assert {"ground", "box"} <= set(cert["touching"]) and cert["supporters_kept"]
+    assert cert["displacement"] < 0.03
+
+
+def test_paper_loop_unchanged_without_faithful(work):
+    pose = make_pose(translation=(0.0, 0.0, 0.2))
+    scene = scene_of(work, {"box": ("box", pose)})
+    g = graph_of(scene, [("ground", "box", "supports")])
+    out, rec = run(work, scene, g, params={})
+    assert "certificate" not in rec["objects"]["box"]
+    assert abs(out.get("box").world_mesh().bounds[0, 2]) < 0.01  # fell to the ground
+
+
+def test_flush_pose_is_the_smallest_rotation():
+    box = trimesh.creation.box((1.0, 2.0, 3.0))
+    normals = resting_normals(box.vertices)
+    assert len(normals) == 6
+    R = Rotation.from_euler("xz", [7, 30], degrees=True).as_matrix()
+    pose = make_pose(R, (1.0, 2.0, 3.0))
+    out, angle = flush_pose(pose, normals, np.zeros(3), np.array([0.0, 0.0, 1.0]), 20.0)
+    assert angle == pytest.approx(7.0, abs=1e-6)
+    Ro, to, _ = decompose(out)
+    assert abs(Ro[2, 2]) == pytest.approx(1.0, abs=1e-9)  # bottom face level
+    assert np.allclose(to, pose[:3, 3])  # rotated about the centre
+    # yaw kept: the x axis stays at 30 deg azimuth
+    assert math.degrees(math.atan2(Ro[1, 0], Ro[0, 0])) == pytest.approx(30.0, abs=1e-6)
+    same, a = flush_pose(pose, normals, np.zeros(3), np.array([0.0, 0.0, 1.0]), 5.0)
+    assert a == 0.0 and np.array_equal(same, pose)
+
+
+# -- pose metrics -------------------------------------------------------------------------------------------
+def test_pose_metrics_analytic(work):
+    a = make_pose(translation=(0.0, 0.0, 0.05))
+    b = make_pose(translation=(1.0, 0.0, 0.05))
+    initial = scene_of(work, {"a": ("box", a), "b": ("box", b)})
+    Rz = Rotation.from_euler("z", 10, degrees=True).as_matrix()
+    moved = scene_of(work, {"a": ("box", make_pose(Rz, (0.03, 0.04, 0.05))), "b": ("box", b)})
+    m = pose_metrics(moved, initial)
+    assert m["displacement_mean"] == pytest.approx(0.025, abs=1e-6)
+    assert m["displacement_max"] == pytest.approx(0.05, abs=1e-6)
+    assert m["rotation_mean"] == pytest.approx(5.0, abs=1e-6)
+    assert m["rotation_max"] == pytest.approx(10.0, abs=1e-6)
+
+
+def test_pose_metrics_alignment_removes_a_rigid_motion(work):
+    poses = {"a": make_pose(translation=(0.0, 0.0, 0.05)), "b": make_pose(translation=(1.0, 0.0, 0.05)),
+             "c": make_pose(translation=(0.0, 0.7, 0.3))}
+    initial = scene_of(work, {k: ("box", p) for k, p in poses.items()})
+    G = make_pose(Rotation.from_euler("zx", [40, 15], degrees=True).as_matrix(), (2.0, -1.0, 0.5))
+    other = scene_of(work, {k: ("box", G @ p) for k, p in poses.items()})
+    raw = pose_metrics(other, initial)
+    assert raw["displacement_mean"] > 0.5
+    al = pose_metrics(other, initial, align=True)
+    assert al["displacement_max"] < 1e-9 and al["rotation_max"] < 1e-6
+
+
+def test_pose_metrics_gt_add_s(work):
+    a = make_pose(translation=(0.0, 0.0, 0.05))
+    gt = scene_of(work, {"a": ("box", a)})
+    # a cube turned 90 deg about z is the same shape: ADD-S 0, rotation error 90
+    turned = scene_of(work, {"a": ("box", make_pose(Rotation.from_euler("z", 90, degrees=True).as_matrix(),
+                                                     (0.0, 0.0, 0.05)))})
+    m = pose_metrics(turned, gt, gt=gt)
+    assert m["gt_rotation_mean"] == pytest.approx(90.0, abs=1e-6)
+    assert m["gt_adds_mean"] < 0.01  # only sampling density remains
+    shifted = scene_of(work, {"a": ("box", make_pose(translation=(0.0, 0.0, 0.08)))})
+    m = pose_metrics(shifted, gt, gt=gt)
+    assert m["gt_translation_max"] == pytest.approx(0.03, abs=1e-9)
+    assert 0.0 < m["gt_adds_mean"] <= 0.03 + 1e-9  # symmetric distance never exceeds the shift
