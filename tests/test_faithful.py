@@ -75,6 +75,7 @@ def test_tilted_box_ends_flush_near_its_input(work):
     assert np.linalg.norm(tb - pose[:3, 3]) < 0.01
     cert = rec["objects"]["box"]["certificate"]
     assert cert["settled"] and cert["supporters_kept"] and "table" in cert["touching"]
+    assert cert["joint_stable"]  # a flush box on a table stays put when the whole scene is released
 
 
 def test_fruit_above_table_stays_and_settles(work):

@@ -232,6 +232,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             objects[oid] = rec
             if progress is not None:
                 progress(_progress_line(index, len(order), oid, rec))
+    if params.faithful.enabled and params.settle and params.faithful.joint_frames > 0:
+        _joint_check(scene.with_poses(poses), proxies, sim, cache_dir, params.faithful, objects)
     unsettled = [o for o, r in objects.items() if r["settled"] is False]
     summary = {"objects": len(order), "settled": sum(r["settled"] is True for r in objects.values()),
                "unsettled": unsettled,
@@ -241,7 +243,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     certs = {o: r["certificate"] for o, r in objects.items() if "certificate" in r}
     if certs:
         summary["supporters_lost"] = {o: c["lost"] for o, c in certs.items() if c["lost"]}
-        summary["remedies"] = {o: c["remedy"] for o, c in certs.items() if c["remedy"] in ("damped", "held")}
+        summary["remedies"] = {o: c["remedy"] for o, c in certs.items() if c["remedy"] != "none"}
+        summary["joint_unstable"] = [o for o, c in certs.items() if c.get("joint_stable") is False]
     if unsettled:
         log.warning("objects that did not meet the settling criterion: %s", ", ".join(unsettled))
     summary["attached"] = sorted(attached)
@@ -337,7 +340,8 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
     up = fa.support_normal(world_mesh, parents_world)
     flushable = not leaning and bool(below)
     normals = fa.resting_normals(hull.vertices) if flushable else np.zeros((0, 3))
-    return {"parents": parents, "below": below, "leaning": [e.source for e in edges if e.relation == "leans_on"], "up": up, "normals": normals, "com": com,
+    leaning_ids = [e.source for e in edges if e.relation == "leans_on"]
+    return {"parents": parents, "below": below, "leaning": leaning_ids, "up": up, "normals": normals, "com": com,
             "flushable": flushable, "flush_angle": 0.0, "diag": float(np.linalg.norm(mesh.extents) * scale)}
 
 
@@ -358,7 +362,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
     loose: list[tuple[float, np.ndarray]] = []  # settled results kept on their supporters within max_roll
 
     def accept(result_pose, start=None, settled_now=False) -> tuple[bool, str]:
-        ok, moved, turned = fa.within_bounds(pose if start is None else start, result_pose, info["com"], info["diag"], fp)
+        ok, moved, turned = fa.within_bounds(pose if start is None else start, result_pose, info["com"],
+                                             info["diag"], fp)
         lost = fa.lost_supporters(info["below"], info["leaning"], touching())
         shift = float(np.linalg.norm((fa.com_world(result_pose, info["com"]) - fa.com_world(pose, info["com"]))[:2]))
         if settled_now and not lost and shift <= fp.max_roll:
@@ -447,3 +452,20 @@ def _lowered(world, oid: str, pose: np.ndarray, below: list[str], clearance: flo
             break
         out[2, 3] -= gap - clearance / 2
     return out
+
+
+def _joint_check(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, cache_dir: Path, fp: FaithfulParams,
+                 objects: dict[str, dict]) -> None:
+    """Release the grounded scene as a whole (the pybullet drift protocol, ``fp.joint_frames`` frames, no offset).
+
+    Adds ``joint_drift`` (m, deg) and ``joint_stable`` (within ``joint_tol`` / ``joint_tol_deg``) to each
+    object's certificate: sequential settling tests each object against a frozen context only.
+    """
+    from phiscene.metrics.physical import PhysicalParams, drift_bullet
+
+    drift = drift_bullet(scene, proxies, PhysicalParams(upward_offset=0.0, frames=fp.joint_frames), sim, cache_dir)
+    for oid, d in drift["objects"].items():
+        cert = objects[oid].get("certificate")
+        if cert is not None:
+            cert["joint_drift"] = [_round(d["drift_trans"]), _round(d["drift_rot"], 6)]
+            cert["joint_stable"] = bool(d["drift_trans"] <= fp.joint_tol and d["drift_rot"] <= fp.joint_tol_deg)

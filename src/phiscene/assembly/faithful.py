@@ -29,7 +29,9 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    too it is frozen at its corrected pose lowered onto its supporters
    (``held``), whose static equilibrium is then tested with one settling
    window at normal settings (the certificate's ``settled``).
-4. **A certificate** per object in the assembly log (:func:`certificate`).
+4. **A certificate** per object in the assembly log (:func:`certificate`), with the result of releasing
+   the whole grounded scene at once (``joint_stable``; sequential settling only tests an object against a
+   frozen context).
 """
 
 from __future__ import annotations
@@ -67,6 +69,11 @@ class FaithfulParams(Params):
     carry
         Move each object with its (first placed) supporter from below: the supporter's change of pose from
         its input is applied to the object's input pose first.
+    joint_frames
+        After the loop the whole scene is released for this many frames (0 = no check); each certificate gets
+        ``joint_drift`` and ``joint_stable``.
+    joint_tol, joint_tol_deg
+        ``joint_stable``: the object moved at most this far (m) and turned at most this much (deg).
     max_stable_angle
         Remedy ``stable``: a rejected object is restarted from its nearest stable resting pose when that is
         within this angle (deg) of its pose.
@@ -90,6 +97,9 @@ class FaithfulParams(Params):
     max_slide_frac: float = 0.25
     max_turn: float = 10.0
     carry: bool = True
+    joint_frames: int = 120
+    joint_tol: float = 0.005
+    joint_tol_deg: float = 1.0
     max_stable_angle: float = 45.0
     max_roll: float = 0.1
     contact_tol: float = 0.004
@@ -98,8 +108,8 @@ class FaithfulParams(Params):
 
     def check(self) -> None:
         """Reject negative bounds and ``retry_damping`` outside [0, 1) (``ValueError``)."""
-        for key in ("max_flush_angle", "max_stable_angle", "max_roll", "max_slide", "max_slide_frac", "max_turn", "contact_tol",
-                    "retry_rolling_friction"):
+        for key in ("max_flush_angle", "max_stable_angle", "max_roll", "joint_frames", "joint_tol", "joint_tol_deg",
+                    "max_slide", "max_slide_frac", "max_turn", "contact_tol", "retry_rolling_friction"):
             if getattr(self, key) < 0:
                 raise ValueError(f"faithful parameter {key!r} must be >= 0, got {getattr(self, key)}")
         if not 0.0 <= self.retry_damping < 1.0:
@@ -270,7 +280,8 @@ def certificate(settled: bool | None, remedy: str, below: list[str], leaning: li
         Why a remedy beyond the paper's was needed.
     """
     lost = lost_supporters(below, leaning, touching)
-    return {"settled": settled, "remedy": remedy, "supporters": list(below) + list(leaning), "touching": sorted(touching),
+    return {"settled": settled, "remedy": remedy, "supporters": list(below) + list(leaning),
+            "touching": sorted(touching),
             "supporters_kept": not lost, "lost": lost, "displacement": round(float(displacement), 9),
             "rotation_change": round(float(rotation_change_deg), 6), "flush_angle": round(float(flush_angle), 6),
             "reason": reason}
