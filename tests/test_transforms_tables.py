@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from phiscene.atomic import atomic_path, write_json
 from phiscene.metrics.evaluate import FORMAT as METRICS_FORMAT
-from phiscene.tables import PHYS_COLUMNS, average_rank, physical_table, to_markdown
+from phiscene.tables import PHYS_COLUMNS, POSE_COLUMNS, average_rank, physical_table, to_markdown
 from phiscene.transforms import (
     Y_UP_TO_Z_UP,
     Z_UP_TO_Y_UP,
@@ -82,11 +82,13 @@ def test_physical_table_means_over_scenes(tmp_path):
         files[m] = []
         for k, v in enumerate(vals):
             p = tmp_path / f"{m}{k}.json"
-            p.write_text(json.dumps({"format": METRICS_FORMAT, "sections": ["physical"], "physical": {
-                "pen_depth": v, "float_dist": v, "drift_trans": v, "drift_rot": 10 * v}}))
+            pose = {k: v + 1 for k in POSE_COLUMNS}
+            p.write_text(json.dumps({"format": METRICS_FORMAT, "sections": ["physical", "pose_gt"], "physical": {
+                "pen_depth": v, "float_dist": v, "drift_trans": v, "drift_rot": 10 * v}, "pose_gt": pose}))
             files[m].append(p)
     df = physical_table(files)
     assert df.loc["a", "pen_depth"] == pytest.approx(0.1) and df.loc["b", "drift_rot"] == pytest.approx(1.0)
+    assert df.loc["a", "displacement_mean"] == pytest.approx(1.1) and df.loc["b", "gt_adds_mean"] == pytest.approx(1.1)
     assert (df["avg_rank"] == 1).all()  # ties share the better rank
     md = to_markdown(df, PHYS_COLUMNS)
     assert "**0.1000**" in md

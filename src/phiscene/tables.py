@@ -38,6 +38,10 @@ CROSSSIM_COLUMNS = {"drift_trans_mujoco": "min", "drift_rot_mujoco": "min"}
 RECON_COLUMNS = {"scene_cd": "min", "scene_fscore": "max", "object_cd": "min", "object_fscore": "max",
                  "bbox_iou": "max"}
 RECON_EXTRA = ["scene_cd_icp", "scene_fscore_icp", "bbox_iou_raw"]
+#: Faithfulness columns (unranked) of the physical and ablation tables: displacement and rotation change from the
+#: input (mean over scenes of the per-scene mean and max over objects), pose error against ground truth.
+POSE_COLUMNS = ["displacement_mean", "displacement_max", "rotation_mean", "rotation_max", "gt_translation_mean",
+                "gt_rotation_mean", "gt_adds_mean"]
 #: Real-scene table: physical metrics in both simulators and faithfulness to the (levelled) input, ranked.
 REAL_COLUMNS = {"pen_depth": "min", "float_dist": "min", "drift_trans": "min", "drift_rot": "min",
                 "drift_trans_mujoco": "min", "drift_rot_mujoco": "min", "displacement_mean": "min",
@@ -112,9 +116,13 @@ def physical_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
     Parameters
     ----------
     files
-        Method name -> per-scene metrics files (``physical`` section).
+        Method name -> per-scene metrics files (``physical`` and ``pose_gt`` sections); the faithfulness
+        columns (:data:`POSE_COLUMNS`) are shown unranked.
     """
-    df = mean_table(files, list(PHYS_COLUMNS), "physical")
+    failed = failed_scenes(files)
+    df = mean_table(files, list(PHYS_COLUMNS), "physical", failed=failed)
+    pose = mean_table(files, POSE_COLUMNS, "pose_gt", failed=failed).drop(columns=["n_scenes", "n_failed"])
+    df = df.join(pose)[[*PHYS_COLUMNS, *POSE_COLUMNS, "n_scenes", "n_failed"]]
     df["avg_rank"] = average_rank(df, PHYS_COLUMNS)
     return df
 
@@ -148,7 +156,9 @@ def ablation_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
     align = mean_table(files, ["mask_iou", "pose_change_trans", "pose_change_rot"], "alignment", failed=failed)
     df = align.drop(columns=["n_scenes", "n_failed"]).join(mean_table(files, list(PHYS_COLUMNS), "physical",
                                                                       failed=failed))
-    df = df[[*ABLATION_COLUMNS, "pose_change_trans", "pose_change_rot", "n_scenes", "n_failed"]]
+    pose = mean_table(files, POSE_COLUMNS, "pose_gt", failed=failed).drop(columns=["n_scenes", "n_failed"])
+    df = df.join(pose)[[*ABLATION_COLUMNS, "pose_change_trans", "pose_change_rot", *POSE_COLUMNS, "n_scenes",
+                        "n_failed"]]
     df["avg_rank"] = average_rank(df, ABLATION_COLUMNS)
     return df
 

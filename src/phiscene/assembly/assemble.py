@@ -233,7 +233,11 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             if progress is not None:
                 progress(_progress_line(index, len(order), oid, rec))
     if params.faithful.enabled and params.settle and params.faithful.joint_frames > 0:
-        _joint_check(scene.with_poses(poses), proxies, sim, cache_dir, params.faithful, objects)
+        grounded = scene.with_poses(poses)
+        for o in grounded.objects:
+            if o.id in attached:
+                o.attached = attached[o.id]
+        _joint_check(grounded, proxies, sim, cache_dir, params.faithful, objects)
     unsettled = [o for o, r in objects.items() if r["settled"] is False]
     summary = {"objects": len(order), "settled": sum(r["settled"] is True for r in objects.values()),
                "unsettled": unsettled,

@@ -51,7 +51,8 @@ SECTION_SETTINGS = {"physical": ("physical", "sim"), "mujoco": ("physical", "sim
 SECTION_INPUTS = {"physical": ("proxies", "cache_dir"), "mujoco": ("proxies",), "alignment": ("initial", "reference_dir"),
                   "recon": ("gt",), "pose": ("initial",), "pose_gt": ("initial", "gt")}
 #: Sections each paper table (:mod:`phiscene.tables`) reads from the metrics files of the methods it shows.
-TABLE_SECTIONS = {"phys": ("physical",), "crosssim": ("physical", "mujoco"), "ablation": ("physical", "alignment"),
+TABLE_SECTIONS = {"phys": ("physical", "pose_gt"), "crosssim": ("physical", "mujoco"),
+                  "ablation": ("physical", "alignment", "pose_gt"),
                   "recon": ("recon",), "real": ("physical", "mujoco", "pose")}
 
 
