@@ -88,3 +88,24 @@ def test_no_votes_keeps_the_prior():
     sphere = trimesh.creation.icosphere(3, 0.1)
     est = estimate_up({"ball": sphere}, [0, 0, 1], LevelParams(box_weight=0.0))
     assert est.tilt_deg == 0.0 and est.votes == {}
+
+
+def test_own_frame_method_rotation_by_icp(tmp_path):
+    """A peer result with its own meshes in its own frame: aligned by centres, each object's turn found by ICP."""
+    from phiscene.meshes import save_mesh
+    from phiscene.metrics.pose import pose_metrics
+    from phiscene.scene import Scene, SceneObject
+    from phiscene.transforms import make_pose, rotation_z
+
+    box = trimesh.creation.box([0.4, 0.2, 0.1])
+    a, b = save_mesh(box, tmp_path / "a.glb"), save_mesh(box, tmp_path / "b.glb")  # same shape, other files
+    centres = [[0, 0, 0.05], [1, 0, 0.05], [0, 1, 0.05], [1, 1.5, 0.05]]
+    initial = Scene([SceneObject(f"o{i}", a, make_pose(translation=c)) for i, c in enumerate(centres)])
+    frame = make_pose(rotation_z(2.0), [5.0, -3.0, 0.0])  # the peer's own frame: turned and shifted
+    turn = [0.0, np.radians(20.0), 0.0, np.radians(5.0)]
+    peer = Scene([SceneObject(f"o{i}", b, frame @ make_pose(rotation_z(t), c)) for i, (c, t) in
+                  enumerate(zip(centres, turn))])
+    m = pose_metrics(peer, initial, align=True)
+    assert m["displacement_max"] < 1e-6
+    assert m["rotation_max"] == pytest.approx(20.0, abs=0.5)
+    assert m["rotation_mean"] == pytest.approx(np.degrees(sum(turn)) / 4, abs=0.5)

@@ -4,7 +4,8 @@ Per scene, over the free (non-attached) objects:
 
 * displacement: distance (m) between each object's centre (its local
   bounding-box centre under its pose) in the scene and in the input;
-* rotation change: angle (deg) of the relative rotation;
+* rotation change: angle (deg) of the relative rotation (objects whose mesh differs from the input's, as in an
+  imported peer result: the rotation of a rigid ICP of their surface samples onto the input's);
 * with ground truth: translation and rotation error against it, and ADD-S
   (mean over seeded surface samples of the GT mesh of the distance from each
   GT-posed sample to the nearest predicted-posed sample; a KD-tree).
@@ -133,13 +134,34 @@ def _compare(scene: Scene, ref: Scene, ids: list[str], align: bool, tkey: str, r
         G[:3, :3], G[:3, 3] = R, t
         c = c @ R.T + t
     trans = np.linalg.norm(c - c0, axis=1)
-    rot = np.array([math.degrees(rotation_angle(G[:3, :3] @ decompose(scene.get(o).pose)[0],
-                                                decompose(ref.get(o).pose)[0])) for o in ids])
+    rot = np.array([_rotation_change(scene.get(o), ref.get(o), G) for o in ids])
     vals = {tkey: trans, rkey: rot}
     if adds:
         moved = {o: _moved(scene.get(o), G) for o in ids}
         vals["gt_adds"] = np.array([_adds(moved[o], ref.get(o), *adds) for o in ids])
     return {f"{k}_{s}": float(getattr(np, s)(v)) for k, v in vals.items() for s in ("mean", "max")}
+
+
+def _rotation_change(obj, ref, G: np.ndarray, samples: int = 2048, seed: int = 0) -> float:
+    """Rotation (deg) between an object and its reference after the alignment ``G`` (4, 4).
+
+    The same mesh in both: the relative rotation of the poses. Different meshes (a method that brings its own,
+    e.g. an imported peer result): the rotation of a rigid ICP (open3d) of seeded surface samples of the aligned
+    object onto the reference, started with their centres matched.
+    """
+    R0 = decompose(np.asarray(ref.pose, dtype=float))[0]
+    R1 = G[:3, :3] @ decompose(np.asarray(obj.pose, dtype=float))[0]
+    if obj.mesh_path == ref.mesh_path:
+        return math.degrees(rotation_angle(R1, R0))
+    from phiscene.meshes import sample_surface
+    from phiscene.metrics.reconstruction import icp
+
+    a = transform_points(G @ np.asarray(obj.pose, dtype=float), sample_surface(obj.mesh(), samples, seed))
+    b = transform_points(np.asarray(ref.pose, dtype=float), sample_surface(ref.mesh(), samples, seed + 1))
+    init = np.eye(4)
+    init[:3, 3] = b.mean(axis=0) - a.mean(axis=0)
+    T = icp(a, b, init, max_iterations=50)
+    return math.degrees(rotation_angle(T[:3, :3], np.eye(3)))
 
 
 def _moved(obj, G: np.ndarray):
