@@ -166,9 +166,10 @@ def _graph(path, edges):
 def test_tables_count_failed_scenes(tmp_path):
     rec = failure_record("metrics", "scene.json: objects[0].mesh: cannot read mesh")
     phys = {k: 0.0 for k in tables.PHYS_COLUMNS}
-    files = {"good": [_metric(tmp_path / "g0.json", physical={**phys, "pen_depth": 1.0}),
-                      _metric(tmp_path / "g1.json", physical={**phys, "pen_depth": 3.0})],
-             "flaky": [_metric(tmp_path / "f0.json", physical={**phys, "pen_depth": 5.0}),
+    pose = {k: 0.0 for k in tables.POSE_COLUMNS}
+    files = {"good": [_metric(tmp_path / "g0.json", physical={**phys, "pen_depth": 1.0}, pose_gt=pose),
+                      _metric(tmp_path / "g1.json", physical={**phys, "pen_depth": 3.0}, pose_gt=pose)],
+             "flaky": [_metric(tmp_path / "f0.json", physical={**phys, "pen_depth": 5.0}, pose_gt=pose),
                        _metric(tmp_path / "f1.json", rec)]}
     df = tables.physical_table(files)
     assert df.loc["good", "pen_depth"] == 2.0 and df.loc["flaky", "pen_depth"] == 5.0  # means over successes

@@ -5,6 +5,8 @@
     phiscene bench OUT_DIR [--suite contact] [--index 0] [--config ...]
     phiscene failures [RESULTS_DIR] [--why]
     phiscene import-sam3d IN_DIR OUT_DIR [--floor NX NY NZ D] [--unit-scale 1]
+    phiscene import-placed MESH_DIR OUT_DIR [--up y|z] [--placements P.json] [--no-level]
+    phiscene import-rest3d ROOT SCENE OUT_DIR [--variant sam3d|ours] [--no-level]
     phiscene import-front3d ROOT OUT_DIR [--room SCENE_ID ...] [--test-rooms 1000] [--initial PATTERN]
     phiscene export SCENE_JSON OUT_DIR [--proxies P.npz] [--topology T.json] [--no-check] [--demo]
 
@@ -152,6 +154,29 @@ def cmd_import_sam3d(args: argparse.Namespace) -> None:
           f"{scene.meta['floor']['from']})")
 
 
+def _report_import(scene, out_dir: str) -> None:
+    lev = scene.meta.get("levelling", {})
+    print(f"wrote {Path(out_dir) / 'initial' / 'scene.json'} ({len(scene)} objects, levelled by "
+          f"{lev.get('rotation_deg', 0.0):.2f} deg; {Path(out_dir) / 'import.json'} has the transform)")
+
+
+def cmd_import_placed(args: argparse.Namespace) -> None:
+    from phiscene.io.placed import PlacedParams, import_placed, read_placed_dir
+
+    objects = read_placed_dir(args.mesh_dir, args.placements)
+    scene = import_placed(objects, args.out_dir, PlacedParams(up=args.up, level=not args.no_level),
+                          source={"kind": "placed", "path": str(args.mesh_dir)})
+    _report_import(scene, args.out_dir)
+
+
+def cmd_import_rest3d(args: argparse.Namespace) -> None:
+    from phiscene.io.placed import PlacedParams
+    from phiscene.io.rest3d import import_rest3d
+
+    scene = import_rest3d(args.root, args.scene, args.out_dir, args.variant, PlacedParams(level=not args.no_level))
+    _report_import(scene, args.out_dir)
+
+
 def cmd_import_front3d(args: argparse.Namespace) -> None:
     from phiscene.io.front3d import Front3dParams, import_front3d_room, scene_id, select_rooms
 
@@ -206,6 +231,23 @@ def build_parser() -> argparse.ArgumentParser:
                          "else estimated)")
     s3.add_argument("--unit-scale", type=float, default=1.0, help="multiply translations and scales (default 1)")
     s3.set_defaults(func=cmd_import_sam3d)
+
+    pl = sub.add_parser("import-placed", help="import per-object meshes placed in one frame, levelled "
+                                               "(README: Real scenes)")
+    pl.add_argument("mesh_dir", help="folder with one mesh file per object (GLB/PLY/OBJ), vertices in one frame")
+    pl.add_argument("out_dir")
+    pl.add_argument("--up", choices=("y", "z"), default="y", help="up-axis convention of the files (default y)")
+    pl.add_argument("--placements", help="JSON {id: {pos, quat (w,x,y,z)} | 4x4} applied to each mesh")
+    pl.add_argument("--no-level", action="store_true", help="trust the up convention (no gravity estimate)")
+    pl.set_defaults(func=cmd_import_placed)
+
+    r3 = sub.add_parser("import-rest3d", help="import one scene of the REST3D page assets (README: Real scenes)")
+    r3.add_argument("root", help="a clone of the REST3D gh-pages branch (holds assets/)")
+    r3.add_argument("scene", help="scene folder name, e.g. custom_viga")
+    r3.add_argument("out_dir")
+    r3.add_argument("--variant", choices=("sam3d", "ours"), default="sam3d")
+    r3.add_argument("--no-level", action="store_true", help="trust the up convention (no gravity estimate)")
+    r3.set_defaults(func=cmd_import_rest3d)
 
     f3 = sub.add_parser("import-front3d", help="import 3D-FRONT test rooms (MIDI-3D layout) as benchmark scenes")
     f3.add_argument("root", help="MIDI-3D's 3D-FRONT folder (midi_room_ids.json, 3D-FRONT-RENDER, ...)")
