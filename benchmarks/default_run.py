@@ -30,7 +30,8 @@ def rule_seconds(results: Path) -> pd.DataFrame:
     rows = []
     for tsv in (results / "benchmarks").rglob("*.tsv"):
         df = pd.read_csv(tsv, sep="\t")
-        rows.append({"stage": str(tsv.relative_to(results / "benchmarks").parent.parts[0]), "s": float(df["s"].iloc[0])})
+        stage = str(tsv.relative_to(results / "benchmarks").parent.parts[0])
+        rows.append({"stage": stage, "s": float(df["s"].iloc[0])})
     if not rows:
         return pd.DataFrame(columns=["jobs", "total_s", "mean_s"])
     df = pd.DataFrame(rows)

@@ -83,13 +83,14 @@ def worker(stage: str, n: int, work: Path, cfg: dict) -> dict:
 
     set_threads(1)
     logging.basicConfig(level=logging.INFO, stream=sys.stderr, format="%(asctime)s %(name)s: %(message)s")
+    import pybullet  # noqa: F401  (imported lazily by the stages)
+    import torch  # noqa: F401
+
     import phiscene.assembly.assemble  # noqa: F401  (warm imports: torch, pybullet, trimesh, scipy)
     import phiscene.bench.build  # noqa: F401
     import phiscene.metrics.physical  # noqa: F401
     import phiscene.sim.bullet  # noqa: F401
     import phiscene.topology  # noqa: F401
-    import pybullet  # noqa: F401  (imported lazily by the stages)
-    import torch  # noqa: F401
 
     p = _paths(work, n)
     # min_visible_pixels 0: at 40 objects some are always occluded in the 320x240 reference view; the

@@ -18,8 +18,8 @@ from scipy.spatial.transform import Rotation
 def table(top_height: float = 0.75, size=(1.2, 0.8), thickness: float = 0.04) -> trimesh.Trimesh:
     """A table, y up, feet at y = 0: a top slab on four legs (one mesh)."""
     w, d = size
-    parts = [trimesh.creation.box([w, thickness, d],
-                                  transform=trimesh.transformations.translation_matrix([0, top_height - thickness / 2, 0]))]
+    top = trimesh.transformations.translation_matrix([0, top_height - thickness / 2, 0])
+    parts = [trimesh.creation.box([w, thickness, d], transform=top)]
     for sx in (-1, 1):
         for sz in (-1, 1):
             leg_h = top_height - thickness
@@ -33,9 +33,10 @@ def objects(with_poster: bool = True, top_height: float = 0.75) -> dict[str, tri
     T = trimesh.transformations.translation_matrix
     out = {"wooden_table_000": table(top_height),
            "cardboard_box_000": trimesh.creation.box([0.3, 0.2, 0.25], transform=T([0.2, top_height + 0.1, 0.05])),
-           "white_plate_000": trimesh.creation.cylinder(0.12, 0.02, sections=48,
-                                                        transform=T([-0.3, top_height + 0.01, -0.1])
-                                                        @ trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))}
+           "white_plate_000": trimesh.creation.cylinder(
+               0.12, 0.02, sections=48,
+               transform=T([-0.3, top_height + 0.01, -0.1]) @ trimesh.transformations.rotation_matrix(np.pi / 2,
+                                                                                                      [1, 0, 0]))}
     if with_poster:
         out["paper_poster_on_the_wall_000"] = trimesh.creation.box([0.6, 0.8, 0.01], transform=T([0.0, 1.6, -1.0]))
     return out

@@ -13,8 +13,15 @@ import pytest
 import trimesh
 
 from phiscene.atomic import write_json
-from phiscene.bench.render import (RenderParams, camera_for, labels_to_colors, load_png, render, save_png,
-                                   segmentation_colors)
+from phiscene.bench.render import (
+    RenderParams,
+    camera_for,
+    labels_to_colors,
+    load_png,
+    render,
+    save_png,
+    segmentation_colors,
+)
 from phiscene.errors import InputError
 from phiscene.meshes import save_mesh
 from phiscene.metrics.alignment import AlignmentParams, alignment_metrics, mask_iou

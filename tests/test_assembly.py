@@ -15,8 +15,16 @@ import pytest
 import torch
 import trimesh
 
-from phiscene.assembly import (AssemblyParams, PenetrationParams, SettleParams, full_order, ground_scene,
-                               resolve_penetration, sdf_body, settle_object)
+from phiscene.assembly import (
+    AssemblyParams,
+    PenetrationParams,
+    SettleParams,
+    full_order,
+    ground_scene,
+    resolve_penetration,
+    sdf_body,
+    settle_object,
+)
 from phiscene.assembly.penetration import AdamState
 from phiscene.errors import InputError
 from phiscene.inertia import rigid_props

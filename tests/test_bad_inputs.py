@@ -13,8 +13,8 @@ import warnings
 
 import pytest
 import yaml
-
 from bad_inputs import CASES, Case, build, mllm_params, topology_path
+
 from phiscene import cli, pipeline
 from phiscene.failures import FORMAT, read_failure
 from phiscene.runner import job

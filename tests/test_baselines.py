@@ -15,9 +15,21 @@ import torch
 import trimesh
 
 from phiscene.assembly.penetration import sdf_body
-from phiscene.baselines import (ImportParams, JointSdfParams, JointSdfSimParams, JointSimParams, LiftParams,
-                                depth_order, import_external, joint_sdf, joint_sdf_sim, joint_sim, lift_scene,
-                                lift_sim, single_parent)
+from phiscene.baselines import (
+    ImportParams,
+    JointSdfParams,
+    JointSdfSimParams,
+    JointSimParams,
+    LiftParams,
+    depth_order,
+    import_external,
+    joint_sdf,
+    joint_sdf_sim,
+    joint_sim,
+    lift_scene,
+    lift_sim,
+    single_parent,
+)
 from phiscene.baselines.joint_sdf import JointLoss
 from phiscene.errors import InputError
 from phiscene.meshes import load_mesh, sample_surface, save_mesh

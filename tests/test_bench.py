@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from simcheck import resimulate
 
 from phiscene.bench.assets import CATEGORY_CYCLE, asset_library
 from phiscene.bench.build import BenchParams, build_scene, default_params, scene_seed
@@ -22,8 +23,6 @@ from phiscene.bench.groundtruth import GTParams, ground_truth, release
 from phiscene.bench.render import colors_to_labels, load_png, project, read_camera, render_instance_mask
 from phiscene.bench.templates import TEMPLATES, template_names
 from phiscene.meshes import save_mesh
-from simcheck import resimulate
-
 from phiscene.proxies import ProxyParams, proxy_for_mesh
 from phiscene.scene import Scene, SceneObject, load_scene
 from phiscene.schemas import read_json, validate

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
+from simcheck import resimulate
 
 from phiscene.bench.build import build_scene, with_suite_defaults
 from phiscene.bench.cleanmesh import is_clean
@@ -20,8 +21,6 @@ from phiscene.bench.furniture import DESIGNS, FURNITURE_CYCLE, TOP_CATEGORIES, d
 from phiscene.bench.render import project, read_camera
 from phiscene.bench.rooms import ROOMS_DEFAULTS, Footprint, separation
 from phiscene.bench.templates import TEMPLATES, TemplateParams, template_names
-from simcheck import resimulate
-
 from phiscene.proxies import ProxyParams
 from phiscene.scene import Scene, load_scene
 from phiscene.schemas import read_json

@@ -8,6 +8,7 @@ resources its rule declares.
 """
 
 import collections
+import json
 import os
 import re
 import subprocess
@@ -26,8 +27,7 @@ TARGET = "results/tables/phys.csv"
 
 def _job_script(path: Path, body: str, rule: str = "r", mem_mb: int = 100, runtime: float = 1.0) -> Path:
     """A job script as Snakemake writes one (``# properties`` line with the rule's resources)."""
-    props = ('{"rule": "%s", "jobid": 7, "threads": 1, "resources": {"mem_mb": %d, "runtime": %s}}'
-             % (rule, mem_mb, runtime))
+    props = json.dumps({"rule": rule, "jobid": 7, "threads": 1, "resources": {"mem_mb": mem_mb, "runtime": runtime}})
     path.write_text(f"#!/bin/sh\n# properties = {props}\n{body}\n")
     return path
 

@@ -13,8 +13,17 @@ import jsonschema
 import pytest
 import yaml
 
-from phiscene.config import (BASELINE_PARAMS, SECTIONS, SOURCE_PARAMS, ConfigError, check_config, deep_merge,
-                             load_class, method_assembly, schema_sections)
+from phiscene.config import (
+    BASELINE_PARAMS,
+    SECTIONS,
+    SOURCE_PARAMS,
+    ConfigError,
+    check_config,
+    deep_merge,
+    load_class,
+    method_assembly,
+    schema_sections,
+)
 from phiscene.params import Params, nested_params
 from phiscene.topology import get_backend
 

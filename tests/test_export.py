@@ -99,7 +99,7 @@ def test_roundtrip_check_detects_a_wrong_pose(bridge, tmp_path):
 def test_urdf_inertial_is_closed_form_box_inertia(bridge):
     out = bridge["out"]
     props = ex.object_props(bridge["scene"], bridge["proxies"], SIM)
-    for name, _, pose in LAYOUT:
+    for name, _, _pose in LAYOUT:
         scale = PLANK_SCALE if name == "plank" else 1.0
         ext_scaled = bridge["scene"].get(name).mesh().extents * scale  # the box as stored (OBJ digits)
         mass = SIM.density * float(np.prod(ext_scaled))

@@ -114,7 +114,7 @@ def test_bugs_still_fail_loudly(tmp_path):
     out = tmp_path / "x.json"
     with pytest.raises(ZeroDivisionError):
         with job("buggy", tmp_path / "l.log", failure_outputs=[out]):
-            1 / 0
+            _ = 1 / 0
     assert not out.exists()
     # without failure outputs (tables, benchmark) a phiscene error is still a one-line exit 1
     with pytest.raises(SystemExit) as exc:

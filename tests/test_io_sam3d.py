@@ -162,7 +162,7 @@ def test_reference_image_masks_and_camera(tmp_path):
     scene = import_sam3d(src, tmp_path / "out", floor=make_floor(-EZ, -HEIGHT))  # flipped normal: re-oriented
     assert_matches_analytic(scene)
     seg = np.asarray(Image.open(tmp_path / "out/reference/segmentation.png").convert("RGB"))
-    for k, o in enumerate(scene.objects):  # objects are read in name order: crate, post, slab
+    for o in scene.objects:  # objects are read in name order: crate, post, slab
         rows = {"crate": 0, "slab": 1, "post": 2}[o.id]
         assert tuple(seg[rows * 5 + 2, 5]) == o.color
     from phiscene.bench.render import project, read_camera
@@ -212,7 +212,7 @@ def test_cli_import_then_ground_end_to_end(tmp_path):
     res = run("ground", str(tmp_path / "imp/initial"), str(tmp_path / "grounded"), "--config", str(cfg))
     assert res.returncode == 0, res.stderr
     after = load_scene(tmp_path / "grounded/scene.json")
-    for name, (ext, s, yaw, xy) in BOXES.items():
+    for name, (_, _, _, xy) in BOXES.items():
         lo, hi = after.get(name).world_mesh().bounds
         assert abs(lo[2]) < 2e-3, (name, lo)  # resting on the floor
         np.testing.assert_allclose((lo[:2] + hi[:2]) / 2, xy, atol=0.01)  # where the image put it

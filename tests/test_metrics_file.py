@@ -5,14 +5,21 @@ from __future__ import annotations
 import json
 
 import pytest
+from test_physical_metrics import FAST, at, box, proxies_of, write_scene
 
 from phiscene.errors import InputError
 from phiscene.failures import failure_record, is_failure_record
-from phiscene.metrics.evaluate import (FORMAT, MetricInputs, MetricTask, methods_metrics, read_section,
-                                       required_inputs, scene_metrics)
+from phiscene.metrics.evaluate import (
+    FORMAT,
+    MetricInputs,
+    MetricTask,
+    methods_metrics,
+    read_section,
+    required_inputs,
+    scene_metrics,
+)
 from phiscene.proxies import write_proxies
 from phiscene.sim.settings import SimSettings
-from test_physical_metrics import FAST, at, box, proxies_of, write_scene
 
 SETTINGS = {"physical": FAST.to_dict(), "sim": SimSettings().to_dict(), "mujoco": {}}
 

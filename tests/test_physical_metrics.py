@@ -11,8 +11,14 @@ import trimesh
 
 from phiscene.errors import InputError
 from phiscene.meshes import save_mesh
-from phiscene.metrics.physical import (PhysicalParams, box_gaps, contact_validity, drift_bullet, object_seed,
-                                       physical_metrics)
+from phiscene.metrics.physical import (
+    PhysicalParams,
+    box_gaps,
+    contact_validity,
+    drift_bullet,
+    object_seed,
+    physical_metrics,
+)
 from phiscene.proxies import ProxyParams, scene_proxies
 from phiscene.scene import Scene, SceneObject, load_scene, save_scene
 from phiscene.sim.bullet import BulletWorld

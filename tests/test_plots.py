@@ -18,8 +18,8 @@ from phiscene.atomic import write_json
 from phiscene.bench.render import RenderParams, camera_for, project, scene_bounds, segmentation_colors
 from phiscene.errors import InputError
 from phiscene.failures import record_for, write_failure
-from phiscene.metrics.evaluate import FORMAT as METRICS_FORMAT
 from phiscene.meshes import save_mesh
+from phiscene.metrics.evaluate import FORMAT as METRICS_FORMAT
 from phiscene.scene import Scene, SceneObject
 from phiscene.topology.graph import SupportEdge, SupportGraph, save
 from phiscene.transforms import make_pose
@@ -87,7 +87,8 @@ def test_drift_distribution(tmp_path):
     files["ours"].append(tmp_path / "failed.json")  # a failed scene is left out, not an error
     _twice(plots.drift_distribution, tmp_path, "drift.png", files, section="mujoco")
     assert _png_size(tmp_path / "a_drift.png") == (2 * 320, 360)
-    write_json(tmp_path / "bad.json", {"format": METRICS_FORMAT, "sections": ["mujoco"], "mujoco": {"drift_trans": 0.1}})
+    write_json(tmp_path / "bad.json",
+               {"format": METRICS_FORMAT, "sections": ["mujoco"], "mujoco": {"drift_trans": 0.1}})
     with pytest.raises(InputError, match="bad.json.*mujoco.drift_rot"):
         plots.drift_distribution({"x": [tmp_path / "bad.json"]}, tmp_path / "y.png", section="mujoco")
     with pytest.raises(InputError, match="bad.json.*no 'physical' section"):

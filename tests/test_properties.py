@@ -10,8 +10,15 @@ from scipy.spatial.transform import Rotation
 
 from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph
 from phiscene.topology.order import finalize, kahn_order
-from phiscene.transforms import (decompose, invert, make_pose, matrix_to_quat_wxyz, quat_wxyz_to_matrix,
-                                 rigidity_error, transform_points)
+from phiscene.transforms import (
+    decompose,
+    invert,
+    make_pose,
+    matrix_to_quat_wxyz,
+    quat_wxyz_to_matrix,
+    rigidity_error,
+    transform_points,
+)
 
 # -- poses -----------------------------------------------------------------------------------------------------------
 finite = st.floats(-10.0, 10.0, allow_nan=False, allow_infinity=False)

@@ -14,8 +14,18 @@ from scipy.spatial.transform import Rotation
 from phiscene.errors import InputError
 from phiscene.meshes import save_mesh
 from phiscene.metrics.reconstruction import (
-    ReconParams, align_paper, apply_transform, bbox_iou, chamfer_and_fscore, chamfer_distance, fscore, icp,
-    nearest_distances, normalize_to_unit_box, reconstruction_metrics, reconstruction_metrics_file,
+    ReconParams,
+    align_paper,
+    apply_transform,
+    bbox_iou,
+    chamfer_and_fscore,
+    chamfer_distance,
+    fscore,
+    icp,
+    nearest_distances,
+    normalize_to_unit_box,
+    reconstruction_metrics,
+    reconstruction_metrics_file,
     similarity_prealign,
 )
 from phiscene.scene import Scene, SceneObject, load_scene, save_scene
@@ -189,8 +199,9 @@ def _meshes(root):
     }
 
 
-def make_scene(root, name: str, world: np.ndarray = np.eye(4), drop: tuple = ()) -> Scene:
-    """A 6-object room-like scene, every pose premultiplied by ``world``; saved and reloaded."""
+def make_scene(root, name: str, world: np.ndarray | None = None, drop: tuple = ()) -> Scene:
+    """A 6-object room-like scene, every pose premultiplied by ``world`` (identity); saved and reloaded."""
+    world = np.eye(4) if world is None else world
     m = _meshes(root)
     layout = [("table", "box", make_pose(rotation_z(0.2), [0, 0, 0.15])),
               ("lamp", "cyl", make_pose(None, [1.2, 0.3, 0.25])),

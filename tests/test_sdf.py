@@ -8,15 +8,22 @@ import numpy as np
 import pytest
 import trimesh
 
-from phiscene.sdf import (SignedDistance, WindingParams, WindingTree, sign_box, signed_distance, signed_distance_for,
-                          winding_number_exact)
+from phiscene.sdf import (
+    SignedDistance,
+    WindingParams,
+    WindingTree,
+    sign_box,
+    signed_distance,
+    signed_distance_for,
+    winding_number_exact,
+)
 
 RANDOM_URDFS = Path(__import__("pybullet_data").getDataPath()) / "random_urdfs"
 
 
-def box_sdf(points: np.ndarray, half: np.ndarray, center=np.zeros(3)) -> np.ndarray:
+def box_sdf(points: np.ndarray, half: np.ndarray, center=(0.0, 0.0, 0.0)) -> np.ndarray:
     """Closed-form SDF of an axis-aligned box."""
-    q = np.abs(points - center) - half
+    q = np.abs(points - np.asarray(center)) - half
     return np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0.0)
 
 

@@ -26,7 +26,6 @@ from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph, load, sav
 from phiscene.topology.order import break_cycles, footprint_area, footprint_key, kahn_order
 from phiscene.transforms import make_pose, random_rotation
 
-
 # ---------------------------------------------------------------- scene builders
 
 def make_scene(root, specs) -> Scene:
@@ -261,8 +260,9 @@ def test_registry(tmp_path):
     with pytest.raises(ValueError, match="does not read a file"):
         topology.infer(scene, "height", given_path=tmp_path / "x.json")
 
-    from phiscene.topology.params import BackendParams
     from dataclasses import dataclass
+
+    from phiscene.topology.params import BackendParams
 
     @dataclass(frozen=True)
     class AllOnGround(BackendParams):

@@ -4,7 +4,7 @@ The package holds every computation of the workflow; Snakemake rules and the
 ``phiscene`` command only orchestrate. See docs/DESIGN.md for the architecture.
 """
 
-from phiscene.errors import PhisceneError, InputError
+from phiscene.errors import InputError, PhisceneError
 
 __all__ = ["PhisceneError", "InputError", "__version__"]
 __version__ = "0.1.0"

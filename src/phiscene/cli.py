@@ -46,6 +46,8 @@ def _scene_file(path: Path) -> Path:
 
 
 def cmd_ground(args: argparse.Namespace) -> None:
+    import time
+
     from phiscene import pipeline
 
     cfg = _config(args.config)
@@ -56,16 +58,24 @@ def cmd_ground(args: argparse.Namespace) -> None:
     given = Path(args.given) if args.given else scene.parent.parent / "gt" / "topology.json"
     if backend == "given" and not given.is_file():
         raise PhisceneError(f"{given}: topology file not found (pass --given FILE)")
-    print(f"[1/3] proxies for {scene}", flush=True)
-    pipeline.run_proxies(scene, out / "proxies.npz", cfg.get("proxies", {}), cache)
-    print(f"[2/3] topology ({backend})", flush=True)
-    pipeline.run_topology(scene, out / "topology.json", backend, cfg.get("topology", {}).get(backend, {}),
-                          given_path=given if backend == "given" else None)
-    print("[3/3] grounding", flush=True)
-    pipeline.run_ground(scene, out / "topology.json", out / "proxies.npz", out / "scene.json", out / "assembly.json",
-                        cfg.get("assembly", {}), cfg.get("sim", {}), cache,
-                        progress=lambda msg: print(f"      {msg}", flush=True))
-    print(f"wrote {out / 'scene.json'} and {out / 'assembly.json'}")
+    topo = cfg.get("topology", {})
+    stages = [
+        ("proxies", lambda: pipeline.run_proxies(scene, out / "proxies.npz", cfg.get("proxies", {}), cache)),
+        (f"topology ({backend})", lambda: pipeline.run_topology(
+            scene, out / "topology.json", backend, topo.get(backend, {}), given_path=given if backend == "given"
+            else None, attached=topo.get("attached", {}))),
+        ("grounding", lambda: pipeline.run_ground(
+            scene, out / "topology.json", out / "proxies.npz", out / "scene.json", out / "assembly.json",
+            cfg.get("assembly", {}), cfg.get("sim", {}), cache,
+            progress=lambda msg: print(f"      {msg}", flush=True))),
+    ]
+    total = time.perf_counter()
+    for k, (name, run) in enumerate(stages):
+        print(f"[{k + 1}/{len(stages)}] {name} of {scene}", flush=True)
+        t0 = time.perf_counter()
+        run()
+        print(f"      {name}: {time.perf_counter() - t0:.2f} s", flush=True)
+    print(f"wrote {out / 'scene.json'} and {out / 'assembly.json'} ({time.perf_counter() - total:.2f} s in all)")
 
 
 def cmd_metrics(args: argparse.Namespace) -> None:

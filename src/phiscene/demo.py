@@ -162,12 +162,12 @@ def throw_ball(index_path: str | Path, params: DemoParams, render=None) -> DemoR
     InputError
         The index is unreadable, or ``params.target`` names no object of it.
     """
+    from dataclasses import replace
+
     import pybullet as p
 
     from phiscene.bench.render import RenderParams, fit_distance, look_at_camera
     from phiscene.io.export import load_urdf_scene, read_urdf_index
-
-    from dataclasses import replace
 
     render = replace(render or RenderParams(), width=int(params.width), height=int(params.height))
     index = read_urdf_index(index_path)

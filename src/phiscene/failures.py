@@ -33,8 +33,8 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 from phiscene.atomic import write_json
 from phiscene.errors import PhisceneError

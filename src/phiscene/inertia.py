@@ -36,7 +36,8 @@ class RigidProps:
     source: str
 
 
-def rigid_props(mesh: trimesh.Trimesh, hulls: list[np.ndarray] | None, density: float, scale: float = 1.0) -> RigidProps:
+def rigid_props(mesh: trimesh.Trimesh, hulls: list[np.ndarray] | None, density: float,
+                scale: float = 1.0) -> RigidProps:
     """Mass, centre of mass and inertia of an object.
 
     A closed (watertight, positive-volume) mesh is integrated exactly; an open

@@ -67,7 +67,8 @@ def check_mesh(mesh: trimesh.Trimesh, path: str | Path | None = None) -> None:
     except Exception:  # qhull fails on flat or collinear input
         hull_volume = 0.0
     if hull_volume < TOL.min_volume:
-        raise InputError(path, None, f"mesh has no volume (convex hull volume {hull_volume:.3g} m^3): flat or degenerate")
+        raise InputError(path, None,
+                         f"mesh has no volume (convex hull volume {hull_volume:.3g} m^3): flat or degenerate")
 
 
 def repair(mesh: trimesh.Trimesh) -> trimesh.Trimesh:

@@ -8,8 +8,8 @@ writes its outputs atomically.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from phiscene.atomic import write_json
 from phiscene.proxies import ProxyParams, proxy_for_mesh, read_proxies, write_proxies
@@ -54,7 +54,6 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
     """phi-Scene grounding of one scene in its topology's order."""
     from phiscene import topology
     from phiscene.assembly.assemble import AssemblyParams, ground_scene
-
     from phiscene.topology.attached import attached_ids
 
     scene = load_scene(scene_path)

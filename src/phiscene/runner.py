@@ -7,8 +7,8 @@ import logging
 import os
 import sys
 import time
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Iterable, Iterator
 
 from phiscene.errors import PhisceneError
 

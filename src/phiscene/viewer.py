@@ -137,7 +137,7 @@ def _legend(scene: Scene, title: str, color_by: str) -> str:
     rows = []
     for o in scene.objects:
         rgb = object_rgb(o, color_by)
-        swatch = "#%02x%02x%02x" % tuple(int(c) for c in rgb)
+        swatch = "#{:02x}{:02x}{:02x}".format(*(int(c) for c in rgb))
         rows.append(f'<li data-object="{html.escape(o.id)}"><span style="background:{swatch}"></span>'
                     f"{html.escape(o.id)} {html.escape(o.description)}</li>")
     return ('<div id="phiscene-legend"><style>#phiscene-legend{position:absolute;top:8px;left:8px;'

@@ -14,11 +14,11 @@ against an analytic answer).
 
 from __future__ import annotations
 
-import json
 import dataclasses
+import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import trimesh
@@ -221,7 +221,8 @@ def mllm_params(root: Path) -> dict:
     """``topology.mllm`` settings that read the answer from a cache seeded by :func:`mllm_answer`."""
     return {"provider": "openai", "model": "fake-model", "base_url": "http://127.0.0.1:9/v1",
             "cache_dir": str(root / "mllm_cache"), "max_retries": 0, "timeout": 1.0,
-            "image": str(root / "reference" / "image.png"), "segmentation": str(root / "reference" / "segmentation.png")}
+            "image": str(root / "reference" / "image.png"),
+            "segmentation": str(root / "reference" / "segmentation.png")}
 
 
 def mllm_answer(text: str) -> Callable[[Path], None]:
@@ -274,7 +275,8 @@ CASES: list[Case] = [
     Case("scene_not_an_object", lambda r: scene_path(r).write_text("[1, 2]"), "scene.json", "(top level)",
          "is not of type 'object'"),
     # malformed or missing fields
-    Case("objects_missing", edit_scene(lambda d: d.pop("objects")), "scene.json", "objects", "required field is missing"),
+    Case("objects_missing", edit_scene(lambda d: d.pop("objects")), "scene.json", "objects",
+         "required field is missing"),
     Case("object_unknown_field", edit_scene(lambda d: d["objects"][0].update(posee=1)), "scene.json",
          "objects[0].posee", "unknown field"),
     Case("mesh_field_missing", edit_scene(lambda d: d["objects"][1].pop("mesh")), "scene.json", "objects[1].mesh",

@@ -244,12 +244,6 @@ def topology_inputs(wildcards):
     return inputs
 
 
-wildcard_constraints:
-    suite=alternation(list(config["suites"])),
-    scene="[A-Za-z0-9_]+",
-    backend="[a-z_]+",
-
-
 def suite_available(suite):
     """Whether a suite's data are here: real-data suites need their local copy (`source.root`)."""
     source = config["suites"][suite].get("source")
@@ -274,18 +268,27 @@ def real_table_inputs(wildcards):
 
 
 def optional_tables():
-    """Tables of `rule all` beyond the default ones: the real table when its suite's data are here (else a note)."""
+    """Tables the default target adds: the real table when its suite's data are here (else a note)."""
     if "real" not in config["tables"]:
         return []
     suite = config["tables"]["real"]["suite"]
     if suite_available(suite):
         return ["results/tables/real.csv"]
     root = config["suites"][suite]["source"]["root"]
-    print(f"note: results/tables/real.csv skipped: the {suite} suite's data are not at {root} "
-          "(README, 'Real scenes', says how to get them)", file=sys.stderr)
+    print(
+        f"note: results/tables/real.csv skipped: the {suite} suite's data are not at {root} "
+        "(README, 'Real scenes', says how to get them)",
+        file=sys.stderr,
+    )
     return []
 
 
 def suite_proxies(wildcards):
     """`proxies` with the suite's `proxies:` override deep-merged over it (phiscene.config)."""
     return phiscene.config.deep_merge(config["proxies"], config["suites"][wildcards.suite].get("proxies", {}))
+
+
+wildcard_constraints:
+    suite=alternation(list(config["suites"])),
+    scene="[A-Za-z0-9_]+",
+    backend="[a-z_]+",

@@ -42,8 +42,12 @@ rule report_table:
     input:
         unpack(lambda wc: table_files([wc.table])),
     output:
-        report("results/report/tables/{table}.html", caption="../report/table.rst", category="Tables",
-               labels={"table": "{table}"}),
+        report(
+            "results/report/tables/{table}.html",
+            caption="../report/table.rst",
+            category="Tables",
+            labels={"table": "{table}"},
+        ),
     wildcard_constraints:
         table=alternation(REPORT_TABLES),
     params:
@@ -67,8 +71,13 @@ rule report_bars:
     input:
         "results/tables/{table}.csv",
     output:
-        report("results/report/figures/{table}_bars.png", caption="../report/bars.rst", category="Figures",
-               subcategory="Metrics per method", labels={"table": "{table}"}),
+        report(
+            "results/report/figures/{table}_bars.png",
+            caption="../report/bars.rst",
+            category="Figures",
+            subcategory="Metrics per method",
+            labels={"table": "{table}"},
+        ),
     wildcard_constraints:
         table=alternation(BAR_TABLES),
     params:
@@ -90,8 +99,13 @@ rule report_drift:
     input:
         unpack(lambda wc: table_inputs(DRIFT_FIGURES[wc.engine][1])),
     output:
-        report("results/report/figures/drift_{engine}.png", caption="../report/drift.rst", category="Figures",
-               subcategory="Drift per scene", labels={"simulator": "{engine}"}),
+        report(
+            "results/report/figures/drift_{engine}.png",
+            caption="../report/drift.rst",
+            category="Figures",
+            subcategory="Drift per scene",
+            labels={"simulator": "{engine}"},
+        ),
     wildcard_constraints:
         engine=alternation(list(DRIFT_FIGURES)),
     params:
@@ -118,8 +132,13 @@ rule report_scene:
         camera="results/scenes/{suite}/{scene}/reference/camera.json",
         topology=report_topology,
     output:
-        report("results/report/scenes/{suite}/{scene}.png", caption="../report/scene.rst", category="Scenes",
-               subcategory="{suite}", labels={"scene": "{scene}", "view": "renders + support graph"}),
+        report(
+            "results/report/scenes/{suite}/{scene}.png",
+            caption="../report/scene.rst",
+            category="Scenes",
+            subcategory="{suite}",
+            labels={"scene": "{scene}", "view": "renders + support graph"},
+        ),
     params:
         method=REPORT_METHOD,
         title="{suite}/{scene}",
@@ -140,8 +159,13 @@ rule report_viewer:
     input:
         scene=lambda wc: method_scene(REPORT_METHOD, wc.suite, wc.scene),
     output:
-        report("results/report/viewers/{suite}/{scene}.html", caption="../report/viewer.rst", category="Scenes",
-               subcategory="{suite}", labels={"scene": "{scene}", "view": "3D viewer"}),
+        report(
+            "results/report/viewers/{suite}/{scene}.html",
+            caption="../report/viewer.rst",
+            category="Scenes",
+            subcategory="{suite}",
+            labels={"scene": "{scene}", "view": "3D viewer"},
+        ),
     params:
         method=REPORT_METHOD,
         title=f"{{suite}}/{{scene}}: {REPORT_METHOD}",
@@ -164,8 +188,12 @@ rule report_demo:
         gif="results/demo/{suite}/{scene}.gif",
         summary="results/demo/{suite}/{scene}.json",
     output:
-        report("results/report/demo/{suite}/{scene}.html", caption="../report/demo.rst", category="Demo",
-               labels={"suite": "{suite}", "scene": "{scene}"}),
+        report(
+            "results/report/demo/{suite}/{scene}.html",
+            caption="../report/demo.rst",
+            category="Demo",
+            labels={"suite": "{suite}", "scene": "{scene}"},
+        ),
     params:
         title="{suite}/{scene}: a ball thrown into the settled scene",
         version=V.REPORT,

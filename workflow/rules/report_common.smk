@@ -12,7 +12,9 @@ if REPORT_METHOD not in config["methods"]:
 
 def report_suites():
     """Suites of the tables: every scene of these gets a picture and a 3D viewer in the report."""
-    return sorted({spec["suite"] for spec in config["tables"].values() if "suite" in spec and suite_available(spec["suite"])})
+    return sorted(
+        {spec["suite"] for spec in config["tables"].values() if "suite" in spec and suite_available(spec["suite"])}
+    )
 
 
 def report_topology(wildcards):
@@ -45,5 +47,7 @@ def report_targets():
 
 def table_files(tables):
     """Named inputs of a table page: csv_<table> and md_<table> of each table."""
-    return {**{f"csv_{t}": f"results/tables/{t}.csv" for t in tables},
-            **{f"md_{t}": f"results/tables/{t}.md" for t in tables}}
+    return {
+        **{f"csv_{t}": f"results/tables/{t}.csv" for t in tables},
+        **{f"md_{t}": f"results/tables/{t}.md" for t in tables},
+    }

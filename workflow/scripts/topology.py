@@ -6,5 +6,5 @@ from phiscene.runner import job
 sm = snakemake  # noqa: F821 (injected by Snakemake)
 with job(f"topology {sm.wildcards.backend} {sm.wildcards.suite}/{sm.wildcards.scene}", sm.log[0], sm.threads,
          failure_outputs=sm.output):
-    run_topology(sm.input.scene, sm.output[0], sm.params.backend, dict(sm.params.settings), given_path=sm.input.get("given"),
-                 attached=dict(sm.params.attached))
+    run_topology(sm.input.scene, sm.output[0], sm.params.backend, dict(sm.params.settings),
+                 given_path=sm.input.get("given"), attached=dict(sm.params.attached))

@@ -33,9 +33,8 @@ Choices the paper leaves open, and what we do:
 
 from __future__ import annotations
 
-from typing import Callable
-
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 

@@ -25,7 +25,8 @@ A prediction is one folder (or one GLB file) per scene, in one of three layouts:
     A REST3D result folder (``meshes/*.glb`` + ``simulation.json``, :mod:`phiscene.io.rest3d`): object meshes
     placed by frame 0 of the simulation, REST3D's y-up frame made z-up (its own levelling kept).
 
-``layout="auto"`` picks ``poses`` when ``poses.json`` exists, else ``rest3d`` when ``simulation.json`` and ``meshes/`` do, else
+``layout="auto"`` picks ``poses`` when ``poses.json`` exists, else ``rest3d`` when ``simulation.json`` and
+``meshes/`` do, else
 ``meshes`` when a mesh file is named after an object id, else ``scene``
 when the folder holds exactly one ``.glb``/``.gltf`` file (or the path is
 such a file).

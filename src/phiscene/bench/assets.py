@@ -33,10 +33,10 @@ import colorsys
 import hashlib
 import json
 import re
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from functools import cached_property, lru_cache
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import trimesh
@@ -330,16 +330,16 @@ def urdf_mesh_scale(urdf: Path) -> tuple[str, np.ndarray, np.ndarray | None]:
 
 def nearest_color_name(rgb01) -> str:
     """Name (key of :data:`COLORS`) of the named colour nearest in hue/lightness to ``rgb01`` (3,) in [0, 1]."""
-    h, l, s = colorsys.rgb_to_hls(*np.clip(np.asarray(rgb01[:3], dtype=float), 0, 1))
-    if s < 0.25 or l < 0.12 or l > 0.9:
-        return "black" if l < 0.25 else ("white" if l > 0.75 else "grey")
+    h, light, s = colorsys.rgb_to_hls(*np.clip(np.asarray(rgb01[:3], dtype=float), 0, 1))
+    if s < 0.25 or light < 0.12 or light > 0.9:
+        return "black" if light < 0.25 else ("white" if light > 0.75 else "grey")
     best, best_d = "grey", np.inf
     for name, c in COLORS.items():
         if name in ("white", "grey", "black", "beige"):
             continue
         hc, lc, _ = colorsys.rgb_to_hls(*(np.asarray(c) / 255.0))
         dh = min(abs(h - hc), 1 - abs(h - hc))
-        d = dh + 0.3 * abs(l - lc)
+        d = dh + 0.3 * abs(light - lc)
         if d < best_d:
             best, best_d = name, d
     return best

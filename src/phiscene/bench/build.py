@@ -36,8 +36,16 @@ from phiscene.bench.assets import ASSET_VERSION, asset_library
 from phiscene.bench.degrade import DegradeParams, degrade_scene
 from phiscene.bench.groundtruth import GroundTruth, GTParams, ground_truth
 from phiscene.bench.render import RenderParams, camera_for, labels_to_colors, render, save_png, segmentation_colors
-from phiscene.bench.templates import (GROUND, LIBRARIES, SUITE_DEFAULTS, TEMPLATES, Placement, TemplateError,
-                                      TemplateParams, template_names)
+from phiscene.bench.templates import (
+    GROUND,
+    LIBRARIES,
+    SUITE_DEFAULTS,
+    TEMPLATES,
+    Placement,
+    TemplateError,
+    TemplateParams,
+    template_names,
+)
 from phiscene.meshes import save_mesh
 from phiscene.params import Params
 from phiscene.proxies import ProxyParams

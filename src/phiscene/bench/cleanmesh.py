@@ -81,6 +81,7 @@ def remesh_union(shells: list[trimesh.Trimesh], pitch: float) -> trimesh.Trimesh
         Grid spacing and target edge length (m).
     """
     import manifold3d
+
     from phiscene.o3d import open3d
     o3d = open3d()
 

@@ -14,9 +14,9 @@ weight, or when it pushes A sideways and A falls once B is removed (leaning).
 from __future__ import annotations
 
 import contextlib
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 

@@ -33,8 +33,20 @@ import numpy as np
 
 from phiscene.bench.assets import Asset, by_category
 from phiscene.bench.furniture import rooms_library
-from phiscene.bench.templates import (LIBRARIES, SUITE_DEFAULTS, Placement, TemplateError, TemplateParams,
-                                      _choose, _gap, _yaw, pose_resting_on, register, top_half_extents, world_bounds)
+from phiscene.bench.templates import (
+    LIBRARIES,
+    SUITE_DEFAULTS,
+    Placement,
+    TemplateError,
+    TemplateParams,
+    _choose,
+    _gap,
+    _yaw,
+    pose_resting_on,
+    register,
+    top_half_extents,
+    world_bounds,
+)
 from phiscene.transforms import rotation_z
 
 SUITE = "rooms"

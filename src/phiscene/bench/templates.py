@@ -14,8 +14,8 @@ The group is built in a canonical frame and then turned by a random yaw.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 

@@ -650,7 +650,7 @@ def release_urdf(index_path: str | Path, seconds: float, upward_offset: float = 
                 out[oid] = make_pose(quat_xyzw_to_matrix(quat), pos)
             return out
 
-        for oid, uid in bodies.items():
+        for uid in bodies.values():
             pos, quat = p.getBasePositionAndOrientation(uid, physicsClientId=client)
             p.resetBasePositionAndOrientation(uid, [pos[0], pos[1], pos[2] + upward_offset], quat,
                                               physicsClientId=client)

@@ -139,12 +139,13 @@ def read_rest3d_dir(folder: str | Path) -> Rest3dScene:
 
 
 def import_rest3d(root: str | Path, scene: str, out_dir: str | Path, variant: str = "sam3d",
-                  params: PlacedParams = PlacedParams()) -> Scene:
+                  params: PlacedParams | None = None) -> Scene:
     """Import one REST3D scene variant as ``OUT_DIR/initial/scene.json`` (+ ``reference/camera.json``).
 
     ``sam3d`` is levelled by our estimate (``params.level``); ``ours`` keeps REST3D's frame (y-up only).
     """
     data = read_rest3d(root, scene, variant)
+    params = params or PlacedParams()
     if variant != "sam3d":
         params = PlacedParams(**{**params.to_dict(), "level": False})
     source = {"kind": "rest3d", "root": str(root), "scene": scene, "variant": variant}

@@ -210,7 +210,8 @@ def read_pose(path: Path) -> tuple[np.ndarray, dict]:
     except (TypeError, ValueError):
         raise InputError(path, "scale", f"not numeric: {data['scale']!r}") from None
     if s.size not in (1, 3) or not np.all(np.isfinite(s)) or np.any(s <= 0):
-        raise InputError(path, "scale", f"expected a positive number or 3 equal positive numbers, got {data['scale']!r}")
+        raise InputError(path, "scale",
+                         f"expected a positive number or 3 equal positive numbers, got {data['scale']!r}")
     if np.ptp(s) > 1e-6 * s.max():
         raise InputError(path, "scale", f"anisotropic scale {s.tolist()}: phiscene poses take one uniform scale")
     extra = {k: v for k, v in data.items() if k not in ("rotation", "translation", "scale")}

@@ -48,8 +48,9 @@ SECTIONS = ("physical", "mujoco", "alignment", "recon", "pose", "pose_gt")
 SECTION_SETTINGS = {"physical": ("physical", "sim"), "mujoco": ("physical", "sim", "mujoco"),
                     "alignment": ("alignment",), "recon": ("recon",), "pose": ("pose",), "pose_gt": ("pose",)}
 #: Input files each section reads (fields of :class:`MetricInputs`).
-SECTION_INPUTS = {"physical": ("proxies", "cache_dir"), "mujoco": ("proxies",), "alignment": ("initial", "reference_dir"),
-                  "recon": ("gt",), "pose": ("initial",), "pose_gt": ("initial", "gt")}
+SECTION_INPUTS = {"physical": ("proxies", "cache_dir"), "mujoco": ("proxies",),
+                  "alignment": ("initial", "reference_dir"), "recon": ("gt",), "pose": ("initial",),
+                  "pose_gt": ("initial", "gt")}
 #: Sections each paper table (:mod:`phiscene.tables`) reads from the metrics files of the methods it shows.
 TABLE_SECTIONS = {"phys": ("physical", "pose_gt"), "crosssim": ("physical", "mujoco"),
                   "ablation": ("physical", "alignment", "pose_gt"),
@@ -179,7 +180,8 @@ def scene_metrics(scene_path: str | Path, sections: list[str] | tuple[str, ...],
     if "mujoco" in order:
         from phiscene.sim.mujoco import MujocoParams, drift_mujoco
 
-        r = out["mujoco"] = drift_mujoco(scene, proxies, physical, sim, MujocoParams.from_dict(settings.get("mujoco", {})))
+        mj = MujocoParams.from_dict(settings.get("mujoco", {}))
+        r = out["mujoco"] = drift_mujoco(scene, proxies, physical, sim, mj)
         log.info("mujoco: drift %.4f m / %.2f deg", r["drift_trans"], r["drift_rot"])
     if "alignment" in order:
         from phiscene.metrics.alignment import AlignmentParams, alignment_metrics

@@ -102,7 +102,7 @@ class ReconParams(Params):
                   "icp_threshold": self.icp_threshold is None or self.icp_threshold > 0}
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
-            raise ValueError(f"invalid reconstruction parameters: "
+            raise ValueError("invalid reconstruction parameters: "
                              + ", ".join(f"{k}={getattr(self, k)!r}" for k in bad))
 
 

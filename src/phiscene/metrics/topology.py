@@ -19,8 +19,8 @@ weighs the same) and :func:`macro_scores` averages the per-scene scores.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass
-from typing import Iterable, Sequence
 
 
 @dataclass(frozen=True)

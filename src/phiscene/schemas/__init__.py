@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from functools import lru_cache
+from functools import cache
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -11,7 +11,7 @@ from typing import Any
 from phiscene.errors import InputError
 
 
-@lru_cache(maxsize=None)
+@cache
 def load_schema(name: str) -> dict:
     """Return the packaged JSON schema ``<name>.schema.json``."""
     text = resources.files("phiscene.schemas").joinpath(f"{name}.schema.json").read_text()

@@ -18,10 +18,10 @@ A new backend plugs in with :func:`register_backend`.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import import_module
 from pathlib import Path
-from typing import Callable
 
 from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph, check_graph, load, save
 

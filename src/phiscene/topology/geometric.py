@@ -69,8 +69,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from phiscene.topology.contacts import (Body, Contact, aabbs_near, ground_contact, hull_offset, pair_contacts,
-                                        prepare_bodies)
+from phiscene.topology.contacts import (
+    Body,
+    Contact,
+    aabbs_near,
+    ground_contact,
+    hull_offset,
+    pair_contacts,
+    prepare_bodies,
+)
 from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph
 from phiscene.topology.order import finalize
 from phiscene.topology.params import BackendParams

@@ -17,9 +17,9 @@ gets it. ``order`` lists every non-ground object exactly once.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Iterable, Sequence
 
 from phiscene import schemas
 from phiscene.atomic import write_json

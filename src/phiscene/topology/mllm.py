@@ -412,7 +412,8 @@ def _json_object(text: str) -> dict:
     except json.JSONDecodeError as exc:
         start, end = text.find("{"), text.rfind("}")
         if start < 0 or end <= start:
-            raise MllmResponseError(f"response is not JSON ({exc.msg} at line {exc.lineno} column {exc.colno})") from None
+            raise MllmResponseError(
+                f"response is not JSON ({exc.msg} at line {exc.lineno} column {exc.colno})") from None
         try:
             data = json.loads(text[start:end + 1])
         except json.JSONDecodeError as exc2:

@@ -11,7 +11,7 @@ on the cycle that :func:`networkx.find_cycle` reports.
 
 from __future__ import annotations
 
-from typing import Callable, Hashable, Iterable, Sequence
+from collections.abc import Callable, Hashable, Iterable, Sequence
 
 import numpy as np
 
