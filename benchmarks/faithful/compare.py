@@ -1,4 +1,4 @@
-"""Ground a scene.json with phi_scene (faithful) and phi_scene_paper; pose + physical metrics (dev comparison).
+"""Ground a scene.json with phi_scene_faithful and phi_scene (the paper's loop); pose + physical metrics (dev comparison).
 
 usage: python benchmarks/faithful/compare.py SCENE_JSON [proxy_backend|convex] [GT_SCENE_JSON|-] [TOPOLOGY_JSON]
 Environment: FAITHFUL='{"max_flush_angle": 10}' overrides assembly.faithful keys. Logs go to /tmp/faithful_viga/.
@@ -60,7 +60,7 @@ def show(name, s, secs, rec=None):
               rec["objects"][k].get("certificate", {}).get("remedy")) for k, v in worst], flush=True)
     print(name, json.dumps({k: (round(v, 3) if isinstance(v, float) else v) for k, v in r.items()}), flush=True)
 show("initial", scene, 0.0)
-for name, over in (("phi_scene", {}), ("phi_scene_paper", {"faithful": {"enabled": False}})):
+for name, over in (("phi_scene_faithful", {"faithful": {"enabled": True}}), ("phi_scene", {"faithful": {"enabled": False}})):
     params = AssemblyParams.from_dict({**cfg["assembly"], **over})
     ground_scene(scene, graph.order, proxies, params, sim, cache, graph=graph)  # warm
     t = time.perf_counter()
