@@ -9,6 +9,7 @@ from snakemake.exceptions import WorkflowError
 from snakemake.utils import min_version, validate
 
 from phiscene.config import ConfigError, check_config, schema_sections
+from phiscene.plugins import PluginError, load_plugins
 
 min_version("9.0")
 
@@ -19,6 +20,10 @@ configfile: os.path.join(workflow.basedir, "config/config.yaml")
 # Every parameter class on its section first (phiscene.config): a misspelled key fails here in one line naming
 # its config path, before any job runs; then the schema checks types and ranges. Jobs that re-read this file
 # (cluster executors) skip the class check: the main process has made it (it imports the stages, ~0.7 s).
+try:  # modules that register tables, metrics, simulators, baselines (phiscene.plugins)
+    load_plugins(config.get("plugins", []))
+except PluginError as exc:
+    raise WorkflowError(str(exc)) from None
 if workflow.is_main_process:
     try:
         check_config(config, schema_sections(os.path.join(workflow.basedir, "config/schema.yaml")))
@@ -32,12 +37,13 @@ include: "workflow/rules/benchmark.smk"
 include: "workflow/rules/proxies.smk"
 include: "workflow/rules/topology.smk"
 include: "workflow/rules/methods.smk"
+include: "workflow/rules/baseline.smk"
 include: "workflow/rules/metrics.smk"
 include: "workflow/rules/tables.smk"
 include: "workflow/rules/export.smk"
 
 
-# Baselines: one rule file each; a method of `kind: <file stem>` in config is built by that file's rule.
+# Method kinds with a rule file of their own (external predictions); registered baselines use baseline.smk.
 for _baseline in sorted(glob.glob(os.path.join(workflow.basedir, "workflow/rules/baselines/*.smk"))):
 
     include: _baseline
@@ -52,11 +58,5 @@ include: "workflow/rules/report.smk"
 rule all:
     default_target: True
     input:
-        "results/tables/phys.csv",
-        "results/tables/topology.csv",
-        "results/tables/crosssim.csv",
-        "results/tables/recon.csv",
-        "results/tables/ablation.csv",
-        "results/tables/runtime.csv",
-        optional_tables(),  # the real-scene table when its data are here
+        default_table_files(),  # every configured table whose suite's data are here, then runtime
         report_targets(),  # figures and pages of `snakemake --report results/report.html`

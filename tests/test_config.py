@@ -14,7 +14,6 @@ import pytest
 import yaml
 
 from phiscene.config import (
-    BASELINE_PARAMS,
     SECTIONS,
     SOURCE_PARAMS,
     ConfigError,
@@ -22,6 +21,7 @@ from phiscene.config import (
     deep_merge,
     load_class,
     method_assembly,
+    method_params,
     schema_sections,
 )
 from phiscene.params import Params, nested_params
@@ -166,7 +166,7 @@ def test_unknown_top_level_section_rejected():
 
 def test_dry_run_accepts_the_default_config_and_rejects_a_misspelled_nested_key(tmp_path):
     rc, out = dry_run(tmp_path, {"suites": {"contact": {"n_scenes": 1}}})
-    assert rc == 0 and "phys_table" in out, out[-3000:]
+    assert rc == 0 and "metrics_contact_phys_crosssim" in out, out[-3000:]
     rc, out = dry_run(tmp_path, {"assembly": {"penetration_params": {"epsilon": 0.01}}})
     assert rc != 0
     assert "config: assembly.penetration_params: unknown key 'epsilon' (known: " in out, out[-3000:]
@@ -205,7 +205,7 @@ def _json_types(annotation) -> set[str]:
 
 def _classes() -> dict[str, type]:
     """Every parameter class a config section is parsed with, and their nested ones, by name."""
-    roots = [load_class(s) for s in [*SECTIONS.values(), *BASELINE_PARAMS.values(), *SOURCE_PARAMS.values()]]
+    roots = [load_class(s) for s in [*SECTIONS.values(), *SOURCE_PARAMS.values()]] + list(method_params().values())
     roots += [get_backend(b).params_cls for b in BUILTIN_BACKENDS]
     out = {}
 
@@ -257,8 +257,8 @@ def test_every_section_refers_to_its_class():
     method = props["methods"]["additionalProperties"]
     assert method["properties"]["assembly"]["$ref"] == f"#/$defs/{load_class(SECTIONS['assembly']).__name__}"
     by_kind = {rule["if"]["properties"]["kind"]["const"]: rule["then"] for rule in method["allOf"]}
-    for kind, spec in BASELINE_PARAMS.items():
-        assert by_kind[kind]["properties"]["params"]["$ref"] == f"#/$defs/{load_class(spec).__name__}", kind
+    for kind, cls in method_params().items():
+        assert by_kind[kind]["properties"]["params"]["$ref"] == f"#/$defs/{cls.__name__}", kind
     suite = props["suites"]["additionalProperties"]["properties"]
     assert suite["benchmark"]["$ref"] == f"#/$defs/{load_class(SECTIONS['benchmark']).__name__}"
     assert [alt["$ref"] for alt in suite["source"]["oneOf"]] == \

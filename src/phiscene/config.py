@@ -17,7 +17,7 @@ Sections and their classes (``module:Class``, imported when a config is checked)
 
 :data:`SECTIONS`
     Fixed paths: ``proxies``, ``sim``, ``assembly``, ``benchmark``, ``metrics.<name>``, ``export.demo``.
-:data:`BASELINE_PARAMS`
+:func:`method_params`
     ``methods.<name>.params`` by the method's ``kind``.
 :data:`SOURCE_PARAMS`
     ``suites.<suite>.source`` by the source's ``kind``.
@@ -39,8 +39,8 @@ from typing import Any
 
 from phiscene.params import nested_params
 
-__all__ = ["BASELINE_PARAMS", "SECTIONS", "SOURCE_PARAMS", "ConfigError", "bench_settings", "check_config",
-           "check_params", "deep_merge", "load_class", "method_assembly", "schema_sections"]
+__all__ = ["METHOD_PARAMS", "SECTIONS", "SOURCE_PARAMS", "ConfigError", "bench_settings", "check_config",
+           "check_params", "deep_merge", "load_class", "method_assembly", "method_params", "schema_sections"]
 
 #: Config path -> parameter class of the fixed sections.
 SECTIONS: dict[str, str] = {
@@ -57,14 +57,19 @@ SECTIONS: dict[str, str] = {
     "export.demo": "phiscene.demo:DemoParams",
 }
 
-#: Baseline method kind -> parameter class of its ``methods.<name>.params`` (a kind not listed takes no check).
-BASELINE_PARAMS: dict[str, str] = {
-    "joint_sdf": "phiscene.baselines.joint_sdf:JointSdfParams",
-    "joint_sim": "phiscene.baselines.joint_sim:JointSimParams",
-    "joint_sdf_sim": "phiscene.baselines.joint_sim:JointSdfSimParams",
-    "lift_sim": "phiscene.baselines.lift:LiftParams",
+#: Method kinds with ``params`` besides the registered baselines (:mod:`phiscene.baselines.registry`), by class.
+METHOD_PARAMS: dict[str, str] = {
     "external": "phiscene.baselines.external:ImportParams",
 }
+
+
+def method_params() -> dict[str, type]:
+    """Method kind -> parameter class of its ``methods.<name>.params``: every registered baseline's class and
+    :data:`METHOD_PARAMS` (a kind not listed takes no check)."""
+    from phiscene.baselines.registry import BASELINES
+
+    return {**{k: b.params for k, b in BASELINES.items()}, **{k: load_class(v) for k, v in METHOD_PARAMS.items()}}
+
 
 #: Real-data source kind -> parameter class of ``suites.<suite>.source``.
 SOURCE_PARAMS: dict[str, str] = {
@@ -201,7 +206,7 @@ def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -
     Checked: unknown top-level sections (when ``sections`` is given), the fixed :data:`SECTIONS`,
     every suite's merged benchmark settings (:func:`bench_settings`) and real-data ``source``,
     ``topology.<backend>`` with the backend's class, every ``phi_scene``-kind method's merged
-    ``assembly`` (:func:`method_assembly`) and every baseline's ``params`` (:data:`BASELINE_PARAMS`).
+    ``assembly`` (:func:`method_assembly`) and every baseline's ``params`` (:func:`method_params`).
 
     Parameters
     ----------
@@ -260,6 +265,48 @@ def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -
         if kind == "phi_scene":
             _mapping(spec.get("assembly"), f"methods.{name}.assembly")  # a non-mapping override: one line too
             check_params(load_class(SECTIONS["assembly"]), method_assembly(config, name), f"methods.{name}.assembly")
-        elif kind in BASELINE_PARAMS:
-            check_params(load_class(BASELINE_PARAMS[kind]), spec.get("params"), f"methods.{name}.params")
+        elif kind in method_params():
+            check_params(method_params()[kind], spec.get("params"), f"methods.{name}.params")
+            from phiscene.baselines.registry import BASELINES
+
+            if kind in BASELINES and "topology" in BASELINES[kind].needs and not spec.get("topology"):
+                raise ConfigError(f"config: methods.{name}.topology: a {kind} baseline places by a support graph: "
+                                  "name its topology backend")
+
+    check_tables(config)
+
+
+def check_tables(config: Mapping[str, Any]) -> None:
+    """Every ``tables.<name>`` entry: a registered kind on a configured suite, with its rows configured.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the entry and the problem (unknown kind or suite, missing rows, an unknown method
+        or topology backend).
+    """
+    from phiscene.table_registry import TABLE_KINDS
+    from phiscene.topology import backend_names
+
+    suites = _mapping(config.get("suites"), "suites")
+    methods = _mapping(config.get("methods"), "methods")
+    for name, spec in _mapping(config.get("tables"), "tables").items():
+        spec = _mapping(spec, f"tables.{name}")
+        kind = spec.get("kind", name)
+        if kind not in TABLE_KINDS:
+            raise ConfigError(f"config: tables.{name}.kind: unknown table kind {kind!r} "
+                              f"(known: {', '.join(TABLE_KINDS)})")
+        if spec.get("suite") not in suites:
+            raise ConfigError(f"config: tables.{name}.suite: unknown suite {spec.get('suite')!r} "
+                              f"(known: {', '.join(suites)})")
+        rows = TABLE_KINDS[kind].rows
+        if rows is None:
+            continue
+        if not spec.get(rows):
+            raise ConfigError(f"config: tables.{name}: a {kind} table needs a list of {rows}")
+        known = list(methods) if rows == "methods" else backend_names()
+        for row in spec[rows]:
+            if row not in known:
+                raise ConfigError(f"config: tables.{name}.{rows}: unknown {rows[:-1]} {row!r} "
+                                  f"(known: {', '.join(known)})")
 

@@ -72,41 +72,31 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
 def run_baseline(kind: str, scene_path: str | Path, out_scene: str | Path, out_log: str | Path, params: dict,
                  sim: dict, cache_dir: str | Path, proxies_path: str | Path | None = None,
                  topology_path: str | Path | None = None) -> None:
-    """One of the paper's baselines (Tab. 6) on one initial scene.
+    """A registered baseline (:mod:`phiscene.baselines.registry`; the paper's Tab. 6 ones) on one initial scene.
 
     Parameters
     ----------
     kind
-        ``joint_sdf`` (CAST-style), ``joint_sdf_sim``, ``joint_sim`` or ``lift_sim`` (PAT3D-style).
+        Registered baseline kind (``joint_sdf``, ``joint_sim``, ``joint_sdf_sim``, ``lift_sim``, ...).
     params
-        The baseline's parameter mapping (its dataclass' ``from_dict``).
+        The baseline's parameter mapping (its class' ``from_dict``).
     proxies_path, topology_path
-        Needed by the simulating baselines and by ``lift_sim`` respectively.
+        The scene's proxies and support graph, for the kinds that need them.
     """
-    from phiscene import baselines, topology
+    from phiscene import topology
+    from phiscene.baselines.registry import BaselineInputs, get_baseline
 
+    baseline = get_baseline(kind)
+    paths = {"proxies": proxies_path, "topology": topology_path}
+    missing = [n for n in baseline.needs if paths[n] is None]
+    if missing:
+        raise ValueError(f"baseline {kind} needs {' and '.join(missing)}")
     scene = load_scene(scene_path)
-    cache_dir = Path(cache_dir)
-    if kind == "joint_sdf":
-        out, record = baselines.joint_sdf(scene, baselines.JointSdfParams.from_dict(params), cache_dir)
-    elif kind in ("joint_sim", "joint_sdf_sim", "lift_sim"):
-        if proxies_path is None:
-            raise ValueError(f"baseline {kind} needs proxies")
-        proxies, simset = read_proxies(proxies_path), SimSettings.from_dict(sim)
-        if kind == "joint_sim":
-            out, record = baselines.joint_sim(scene, proxies, simset, baselines.JointSimParams.from_dict(params),
-                                              cache_dir)
-        elif kind == "joint_sdf_sim":
-            out, record = baselines.joint_sdf_sim(scene, proxies, simset,
-                                                  baselines.JointSdfSimParams.from_dict(params), cache_dir)
-        else:
-            if topology_path is None:
-                raise ValueError("baseline lift_sim needs a topology file")
-            graph = topology.load(topology_path, scene_ids=scene.ids)
-            out, record = baselines.lift_sim(scene, graph, proxies, simset, baselines.LiftParams.from_dict(params),
-                                             cache_dir)
-    else:
-        raise ValueError(f"unknown baseline kind {kind!r}")
+    inputs = BaselineInputs(
+        scene, SimSettings.from_dict(sim), Path(cache_dir),
+        proxies=read_proxies(proxies_path) if "proxies" in baseline.needs else None,
+        graph=topology.load(topology_path, scene_ids=scene.ids) if "topology" in baseline.needs else None)
+    out, record = baseline.run(inputs, baseline.params.from_dict(params))
     write_json(out_log, record)
     save_scene(out, out_scene)
 

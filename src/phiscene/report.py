@@ -19,14 +19,13 @@ import html
 import logging
 import tempfile
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from phiscene.atomic import atomic_path, write_text
 from phiscene.errors import InputError
-from phiscene.tables import ABLATION_COLUMNS, CROSSSIM_COLUMNS, PHYS_COLUMNS, RECON_COLUMNS, TOPO_COLUMNS
+from phiscene.table_registry import TableKind, table_kind
 
 log = logging.getLogger(__name__)
 
@@ -38,46 +37,6 @@ EMBED_LIMIT_BYTES = 1_500_000
 #: Gap (pixels) between and around the images of :func:`side_by_side`.
 PANEL_GAP_PX = 6
 
-
-@dataclass(frozen=True)
-class TableSpec:
-    """How the report shows one of the paper's tables.
-
-    Attributes
-    ----------
-    title
-        Heading of the table.
-    directions
-        Ranked metric columns -> ``"min"`` or ``"max"`` (what is better), as the table's writer ranks them.
-    bars
-        Columns drawn by :func:`phiscene.plots.method_bars` (empty: no bar chart).
-    log
-        Logarithmic value axes for the bars.
-    index_columns
-        Leading CSV columns that name a row (the runtime table's rows are (stage, suite) pairs).
-    """
-
-    title: str
-    directions: dict
-    bars: tuple[str, ...] = ()
-    log: bool = False
-    index_columns: int = 1
-
-
-#: The tables of ``results/tables/`` the report shows, in page order.
-TABLES: dict[str, TableSpec] = {
-    "phys": TableSpec("Physical plausibility (paper Tab. 2; metres, degrees)", PHYS_COLUMNS,
-                      tuple(PHYS_COLUMNS), log=True),
-    "crosssim": TableSpec("Cross-simulator drift (paper Tab. 3; MuJoCo ranked, pybullet beside)", CROSSSIM_COLUMNS,
-                          (*CROSSSIM_COLUMNS, "drift_trans_bullet", "drift_rot_bullet"), log=True),
-    "recon": TableSpec("Reconstruction against ground truth (paper Tab. 1; MIDI-3D protocol)", RECON_COLUMNS,
-                       tuple(RECON_COLUMNS)),
-    "topology": TableSpec("Support graph accuracy (paper Tab. 7; edges against ground truth)", TOPO_COLUMNS,
-                          (*TOPO_COLUMNS, "f1_macro")),
-    "ablation": TableSpec("Ablations and baselines (paper Tab. 6; mask IoU in place of CLIP-I)", ABLATION_COLUMNS,
-                          tuple(ABLATION_COLUMNS), log=True),
-    "runtime": TableSpec("Runtime per stage (seconds, MB)", {}, index_columns=2),
-}
 
 _CSS = """
 body{font:13px/1.4 system-ui,-apple-system,"Segoe UI",sans-serif;margin:16px;color:#222}
@@ -120,23 +79,27 @@ def read_table(table_csv: str | Path, index_columns: int = 1):
     return df
 
 
-def _spec(name: str) -> TableSpec:
-    if name not in TABLES:
-        raise ValueError(f"unknown table {name!r}; known: {list(TABLES)}")
-    return TABLES[name]
+def _spec(name: str, kind: str | None = None) -> TableKind:
+    """The registered kind of table ``name`` (``kind``, default the name itself)."""
+    return table_kind(kind or name)
 
 
-def table_block(name: str, table_csv: str | Path, markdown: str | Path | None = None) -> str:
+def table_block(name: str, table_csv: str | Path, markdown: str | Path | None = None, kind: str | None = None,
+                title: str | None = None) -> str:
     """HTML block of one table: heading, the table (best bold, second underlined), legend, downloads.
 
     Parameters
     ----------
     name
-        Key of :data:`TABLES`.
+        The table's name (``results/tables/<name>.csv``).
     table_csv
         The table's CSV file.
     markdown
         Its Markdown twin: offered for download beside the CSV when given.
+    kind
+        Its kind (:mod:`phiscene.table_registry`; default ``name``).
+    title
+        Heading (default the kind's report title).
 
     Returns
     -------
@@ -146,9 +109,10 @@ def table_block(name: str, table_csv: str | Path, markdown: str | Path | None = 
 
     from phiscene.tables import to_html
 
-    spec = _spec(name)
+    spec = _spec(name, kind)
+    directions = spec.ranked()
     df = read_table(table_csv, spec.index_columns)
-    for c in spec.directions:
+    for c in directions:
         if c not in df.columns:
             raise InputError(table_csv, c, f"ranked column of the {name} table missing")
     # the CSV does not keep int vs float: a metric whose values all print as integers (an F-score of 1)
@@ -159,10 +123,10 @@ def table_block(name: str, table_csv: str | Path, markdown: str | Path | None = 
     links = [_download(Path(table_csv), "text/csv")]
     if markdown is not None:
         links.append(_download(Path(markdown), "text/markdown"))
-    note = _NOTE if spec.directions else "not ranked"
+    note = _NOTE if directions else "not ranked"
     return (f'<div class="phiscene-table" id="table-{html.escape(name)}">\n'
-            f"<h3>{html.escape(spec.title)} <small>({html.escape(Path(table_csv).name)})</small></h3>\n"
-            f"{to_html(df, spec.directions)}<p>{html.escape(note)}. Download: {' · '.join(links)}</p>\n</div>\n")
+            f"<h3>{html.escape(title or spec.title)} <small>({html.escape(Path(table_csv).name)})</small></h3>\n"
+            f"{to_html(df, directions)}<p>{html.escape(note)}. Download: {' · '.join(links)}</p>\n</div>\n")
 
 
 def _download(path: Path, mime: str) -> str:
@@ -174,13 +138,14 @@ def _download(path: Path, mime: str) -> str:
 
 
 def tables_html(tables: dict[str, str | Path], out_html: str | Path, title: str = "phiscene tables",
-                markdown: dict[str, str | Path] | None = None, fragment: bool = False) -> Path:
+                markdown: dict[str, str | Path] | None = None, fragment: bool = False,
+                kinds: dict[str, str] | None = None, titles: dict[str, str] | None = None) -> Path:
     """Write the given tables as one HTML page (or a fragment to embed in another page).
 
     Parameters
     ----------
     tables
-        Table name (key of :data:`TABLES`) -> its CSV file, in page order.
+        Table name -> its CSV file, in page order.
     out_html
         Output file.
     title
@@ -189,6 +154,8 @@ def tables_html(tables: dict[str, str | Path], out_html: str | Path, title: str 
         Table name -> its Markdown twin, offered for download beside the CSV.
     fragment
         Write a ``<div>`` with its own scoped style (for the report's front page) instead of a whole page.
+    kinds, titles
+        Table name -> its kind and heading, for tables whose name is not their kind (:func:`table_block`).
 
     Returns
     -------
@@ -199,8 +166,8 @@ def tables_html(tables: dict[str, str | Path], out_html: str | Path, title: str 
     InputError
         A table that is missing, unreadable or lacks a ranked column.
     """
-    markdown = markdown or {}
-    blocks = "".join(table_block(n, p, markdown.get(n)) for n, p in tables.items())
+    markdown, kinds, titles = markdown or {}, kinds or {}, titles or {}
+    blocks = "".join(table_block(n, p, markdown.get(n), kinds.get(n), titles.get(n)) for n, p in tables.items())
     css = _CSS.replace("body{", ".phiscene-tables{").strip()
     if fragment:
         page = f'<div class="phiscene-tables"><style>{css}{_FRONT_CSS.strip()}</style>\n{blocks}</div>\n'
@@ -212,8 +179,8 @@ def tables_html(tables: dict[str, str | Path], out_html: str | Path, title: str 
     return out_html
 
 
-def bars_figure(name: str, table_csv: str | Path, out_png: str | Path) -> Path:
-    """Per-method bar chart of a table's metric columns (:data:`TABLES` says which, and the axis scale).
+def bars_figure(name: str, table_csv: str | Path, out_png: str | Path, kind: str | None = None) -> Path:
+    """Per-method bar chart of a table's metric columns (its kind says which, and the axis scale).
 
     Returns
     -------
@@ -221,10 +188,10 @@ def bars_figure(name: str, table_csv: str | Path, out_png: str | Path) -> Path:
     """
     from phiscene.plots import method_bars
 
-    spec = _spec(name)
-    if not spec.bars:
+    spec = _spec(name, kind)
+    if not spec.bar_columns():
         raise ValueError(f"the {name} table has no bar chart")
-    return method_bars(table_csv, out_png, spec.bars, log=spec.log)
+    return method_bars(table_csv, out_png, spec.bar_columns(), log=spec.log)
 
 
 def side_by_side(images: Sequence[str | Path], out_png: str | Path, gap: int = PANEL_GAP_PX) -> Path:

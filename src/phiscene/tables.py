@@ -32,8 +32,6 @@ from phiscene.failures import is_failure_record
 PHYS_COLUMNS = {"pen_depth": "min", "float_dist": "min", "drift_trans": "min", "drift_rot": "min"}
 #: Topology table columns and whether lower is better.
 TOPO_COLUMNS = {"precision": "max", "recall": "max", "f1": "max"}
-#: Cross-simulator table: ranked on the MuJoCo drift (the independent engine); pybullet shown beside it.
-CROSSSIM_COLUMNS = {"drift_trans_mujoco": "min", "drift_rot_mujoco": "min"}
 #: Reconstruction table (paper Tab. 1): ranked columns; the ICP-only and raw-IoU variants are shown unranked.
 RECON_COLUMNS = {"scene_cd": "min", "scene_fscore": "max", "object_cd": "min", "object_fscore": "max",
                  "bbox_iou": "max"}
@@ -127,20 +125,30 @@ def physical_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
     return df
 
 
-def crosssim_table(files: dict[str, list[str | Path]]) -> pd.DataFrame:
-    """Tab. 3: post-simulation drift in MuJoCo (ranked) beside the same protocol in pybullet.
+def crosssim_table(files: dict[str, list[str | Path]],
+                   simulators: list[tuple[str, str, bool]] | None = None) -> pd.DataFrame:
+    """Tab. 3: post-simulation drift per simulator, ranked on the engines independent of the grounding's.
 
     Parameters
     ----------
     files
-        Method name -> per-scene metrics files (``mujoco`` and ``physical`` sections).
+        Method name -> per-scene metrics files (holding each simulator's section).
+    simulators
+        Per engine, in column order: its metrics section, its column suffix and whether it is ranked
+        (default: every registered simulator, :func:`phiscene.metrics.drift.table_simulators`).
     """
+    from phiscene.metrics.drift import table_simulators
+
     keys = ["drift_trans", "drift_rot"]
+    sims = simulators or [(s.section, s.column, s.ranked) for s in table_simulators()]
     failed = failed_scenes(files)
-    mj = mean_table(files, keys, "mujoco", "_mujoco", failed)
-    pb = mean_table(files, keys, "physical", "_bullet", failed).drop(columns=["n_scenes", "n_failed"])
-    df = mj.join(pb)[[*CROSSSIM_COLUMNS, "drift_trans_bullet", "drift_rot_bullet", "n_scenes", "n_failed"]]
-    df["avg_rank"] = average_rank(df, CROSSSIM_COLUMNS)
+    parts = [mean_table(files, keys, section, f"_{column}", failed) for section, column, _ in sims]
+    df = parts[0].drop(columns=["n_scenes", "n_failed"])
+    for part in parts[1:]:
+        df = df.join(part.drop(columns=["n_scenes", "n_failed"]))
+    df = df.join(parts[0][["n_scenes", "n_failed"]])
+    ranked = {f"{k}_{column}": "min" for _, column, r in sims if r for k in keys}
+    df["avg_rank"] = average_rank(df, ranked)
     return df
 
 

@@ -66,26 +66,64 @@ def methods_of_kind(kind):
     return [m for m, spec in config["methods"].items() if spec["kind"] == kind]
 
 
-#: Method kinds with a rule outside workflow/rules/baselines/ (methods.smk).
+#: Method kinds built by their own rules (methods.smk: reference, phi_scene; workflow/rules/baselines/*.smk).
 BUILTIN_KINDS = ("reference", "phi_scene")
 #: Method kinds whose scenes bring their own meshes (their proxies are computed from the method's scene).
 OWN_MESH_KINDS = ("external",)
 
 
+def registered_baseline_methods():
+    """Methods whose kind is a registered baseline (phiscene.baselines.registry): the generic `baseline` rule's."""
+    from phiscene.baselines.registry import BASELINES
+
+    return [m for m, spec in config["methods"].items() if spec["kind"] in BASELINES]
+
+
 def check_method_kinds():
-    """Every configured method's kind must have a rule (built in, or workflow/rules/baselines/<kind>.smk)."""
+    """Every configured method's kind must have a rule: built in, a registered baseline, or a rule file
+    workflow/rules/baselines/<kind>.smk."""
     import glob as _glob
 
-    known = set(BUILTIN_KINDS) | {
-        os.path.splitext(os.path.basename(f))[0]
-        for f in _glob.glob(os.path.join(workflow.basedir, "workflow/rules/baselines/*.smk"))
-    }
+    from phiscene.baselines.registry import BASELINES
+
+    known = (
+        set(BUILTIN_KINDS)
+        | set(BASELINES)
+        | {
+            os.path.splitext(os.path.basename(f))[0]
+            for f in _glob.glob(os.path.join(workflow.basedir, "workflow/rules/baselines/*.smk"))
+        }
+    )
     for name, spec in config["methods"].items():
         if spec["kind"] not in known:
             raise ValueError(
                 f"config: methods.{name}.kind: unknown kind {spec['kind']!r}; known: {sorted(known)} "
-                f"(add workflow/rules/baselines/{spec['kind']}.smk for a new one)"
+                "(register a baseline in phiscene.baselines.registry for a new one)"
             )
+
+
+def method_kind(wildcards):
+    """The kind of a job's method."""
+    return config["methods"][wildcards.method]["kind"]
+
+
+def external_prediction(wildcards):
+    """The prediction folder of a job's external method (its `path` with suite and scene filled in)."""
+    return config["methods"][wildcards.method]["path"].format(suite=wildcards.suite, scene=wildcards.scene)
+
+
+def baseline_inputs(wildcards):
+    """The initial scene, plus what the method's registered baseline needs (proxies, its topology graph)."""
+    from phiscene.baselines.registry import get_baseline
+
+    base = f"results/scenes/{wildcards.suite}/{wildcards.scene}"
+    inputs = {"scene": f"{base}/initial/scene.json"}
+    needs = get_baseline(method_kind(wildcards)).needs
+    if "proxies" in needs:
+        inputs["proxies"] = f"results/proxies/{wildcards.suite}/{wildcards.scene}.npz"
+    if "topology" in needs:
+        inputs["topology"] = method_topology(wildcards)
+    return inputs
 
 
 def method_scene(method, suite, scene):
@@ -135,11 +173,11 @@ def alternation(names):
 
 
 def tables_showing(method, suite):
-    """The tables with metrics files (phiscene.metrics.evaluate.TABLE_SECTIONS) that show a method on a suite."""
-    from phiscene.metrics.evaluate import TABLE_SECTIONS
-
+    """The configured tables with metrics files (their kind reads metric sections) that show a method on a suite."""
     return [
-        t for t in TABLE_SECTIONS if config["tables"][t]["suite"] == suite and method in config["tables"][t]["methods"]
+        t
+        for t, spec in config["tables"].items()
+        if table_kind(t).metric_sections() and spec.get("suite") == suite and method in spec.get("methods", [])
     ]
 
 
@@ -159,9 +197,9 @@ def metric_groups(suite):
 
 def metric_sections(method, suite):
     """Sections of a method's metrics files on a suite: those of every table that shows the method there."""
-    from phiscene.metrics.evaluate import TABLE_SECTIONS, check_sections
+    from phiscene.metrics.evaluate import check_sections
 
-    return check_sections({s for t in tables_showing(method, suite) for s in TABLE_SECTIONS[t]})
+    return check_sections({s for t in tables_showing(method, suite) for s in table_kind(t).metric_sections()})
 
 
 def metric_tasks(suite, methods):
@@ -179,10 +217,10 @@ def metric_tasks(suite, methods):
 
 def metric_settings(suite, methods):
     """The settings the methods' metric sections read (a change reruns only the jobs that use it)."""
-    from phiscene.metrics.evaluate import SECTION_SETTINGS
+    from phiscene.metrics.evaluate import section_settings
 
-    names = {n for t in metric_tasks(suite, methods) for s in t["sections"] for n in SECTION_SETTINGS[s]}
-    return {n: (config["sim"] if n == "sim" else config["metrics"][n]) for n in sorted(names)}
+    names = {n for t in metric_tasks(suite, methods) for n in section_settings(t["sections"])}
+    return {n: (config["sim"] if n == "sim" else config["metrics"].get(n, {})) for n in sorted(names)}
 
 
 def metrics_inputs(suite, methods, scene):
@@ -214,25 +252,118 @@ def metrics_inputs(suite, methods, scene):
     return inputs
 
 
+def table_kind(name):
+    """The registered kind (phiscene.table_registry) of table `name`: its `tables.<name>.kind`, default the name."""
+    from phiscene.table_registry import kind_of
+
+    return kind_of(name, config["tables"].get(name))
+
+
+def table_names():
+    """Every table the generic `table` job makes. The configured ones, then the registered kinds that need no config
+    (those reading the benchmark TSVs: runtime)."""
+    from phiscene.table_registry import TABLE_KINDS
+
+    names = list(config["tables"])
+    return names + [k for k, kind in TABLE_KINDS.items() if kind.reads == "benchmarks" and k not in names]
+
+
+def table_available(name):
+    """Whether a table's suite has its data here (tables without a suite always are)."""
+    suite = config["tables"].get(name, {}).get("suite")
+    return suite is None or suite_available(suite)
+
+
+def table_scenes(name):
+    """Scene ids of a table's suite ([] for a table without one)."""
+    suite = config["tables"].get(name, {}).get("suite")
+    return scene_ids(suite) if suite else []
+
+
+def table_rows(name):
+    """Rows of a table: its configured `methods` or `backends` (by its kind), [] for a kind without rows."""
+    key = table_kind(name).rows
+    return list(config["tables"][name][key]) if key else []
+
+
 def table_inputs(table):
     """Per method of a table: the metrics files of every scene of the table's suite."""
     suite = config["tables"][table]["suite"]
-    return {
-        m: expand(f"results/metrics/{m}/{suite}/{{scene}}.json", scene=scene_ids(suite))
-        for m in config["tables"][table]["methods"]
-    }
+    return {m: expand(f"results/metrics/{m}/{suite}/{{scene}}.json", scene=scene_ids(suite)) for m in table_rows(table)}
 
 
-def topology_table_inputs(wildcards):
-    """Per backend the predicted support graphs of the topology table's suite, and the ground-truth graphs."""
-    suite = config["tables"]["topology"]["suite"]
+def table_rule_inputs(wildcards):
+    """Inputs of the `table` rule, by what the table's kind reads (phiscene.table_registry.READS)."""
+    name = wildcards.table
+    kind = table_kind(name)
+    if kind.reads == "benchmarks":  # the jobs of the embedded-benchmark tables wrote the TSVs it reads
+        return {"tables": [f"results/tables/{t}.csv" for t in benchmark_tables()]}
+    suite = config["tables"][name]["suite"]
     scenes = scene_ids(suite)
-    inputs = {
-        b: expand(f"results/topology/{b}/{suite}/{{scene}}.json", scene=scenes)
-        for b in config["tables"]["topology"]["backends"]
-    }
-    inputs["gt_topology"] = expand(f"results/scenes/{suite}/{{scene}}/gt/topology.json", scene=scenes)
+    if kind.reads == "topology":
+        inputs = {b: expand(f"results/topology/{b}/{suite}/{{scene}}.json", scene=scenes) for b in table_rows(name)}
+        inputs["gt_topology"] = expand(f"results/scenes/{suite}/{{scene}}/gt/topology.json", scene=scenes)
+        return inputs
+    inputs = table_inputs(name)
+    if kind.logs:
+        for m in table_rows(name):
+            if config["methods"][m]["kind"] == "phi_scene":
+                inputs[f"log_{m}"] = expand(f"results/methods/{m}/{suite}/{{scene}}/assembly.json", scene=scenes)
     return inputs
+
+
+def table_params(wildcards):
+    """What the table script needs besides its inputs: kind, rows, scenes and Markdown heading."""
+    from phiscene.table_registry import heading_of
+
+    name = wildcards.table
+    return {
+        "kind": table_kind(name).name,
+        "rows": table_rows(name),
+        "scenes": table_scenes(name),
+        "heading": heading_of(name, config["tables"].get(name)),
+        "benchmarks": "results/benchmarks",
+    }
+
+
+def benchmark_tables():
+    """Configured tables on embedded-benchmark suites (no real-data `source`): the runtime table's inputs, so that
+    `snakemake results/tables/runtime.csv` never needs real data."""
+    return [t for t, spec in config["tables"].items() if "source" not in config["suites"][spec["suite"]]]
+
+
+#: Notes already printed while the DAG is built (each once).
+NOTES_SHOWN = set()
+
+
+def default_tables():
+    """Tables of the default target (`all`). Every configured table whose suite's data are here (a note names the others),
+    then the runtime table (which reads the benchmark TSVs of `benchmark_tables()`)."""
+    out = []
+    for name in config["tables"]:
+        if table_available(name):
+            out.append(name)
+            continue
+        suite = config["tables"][name]["suite"]
+        root = config["suites"][suite]["source"]["root"]
+        note = (
+            f"note: results/tables/{name}.csv skipped: the {suite} suite's data are not at {root} "
+            "(README, 'Real scenes', says how to get them)"
+        )
+        if note not in NOTES_SHOWN:
+            NOTES_SHOWN.add(note)
+            print(note, file=sys.stderr)
+    return out + [t for t in table_names() if t not in config["tables"]]
+
+
+def default_table_files():
+    """Files of `default_tables()`: each CSV, and the per-scene CSV of kinds that write one."""
+    out = []
+    for t in default_tables():
+        out.append(f"results/tables/{t}.csv")
+        if table_kind(t).scene_rows is not None:
+            out.append(f"results/tables/{t}_scenes.csv")
+    return out
 
 
 def topology_inputs(wildcards):
@@ -248,39 +379,6 @@ def suite_available(suite):
     """Whether a suite's data are here: real-data suites need their local copy (`source.root`)."""
     source = config["suites"][suite].get("source")
     return source is None or os.path.isdir(os.path.join(source["root"], "assets" if source["kind"] == "rest3d" else ""))
-
-
-def real_table_scenes(wildcards=None):
-    """Scene ids of the real table's suite."""
-    return scene_ids(config["tables"]["real"]["suite"])
-
-
-def real_table_inputs(wildcards):
-    """Metrics files of every method of the real table, plus the assembly logs of its grounding methods."""
-    if "real" not in config["tables"]:
-        raise ValueError("config: tables.real is not configured (suite and methods of the real-scene table)")
-    inputs = table_inputs("real")
-    suite = config["tables"]["real"]["suite"]
-    for m in config["tables"]["real"]["methods"]:
-        if config["methods"][m]["kind"] == "phi_scene":
-            inputs[f"log_{m}"] = expand(f"results/methods/{m}/{suite}/{{scene}}/assembly.json", scene=scene_ids(suite))
-    return inputs
-
-
-def optional_tables():
-    """Tables the default target adds: the real table when its suite's data are here (else a note)."""
-    if "real" not in config["tables"]:
-        return []
-    suite = config["tables"]["real"]["suite"]
-    if suite_available(suite):
-        return ["results/tables/real.csv"]
-    root = config["suites"][suite]["source"]["root"]
-    print(
-        f"note: results/tables/real.csv skipped: the {suite} suite's data are not at {root} "
-        "(README, 'Real scenes', says how to get them)",
-        file=sys.stderr,
-    )
-    return []
 
 
 def suite_proxies(wildcards):

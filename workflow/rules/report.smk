@@ -18,11 +18,12 @@ include: "report_common.smk"
 
 rule report_front_tables:
     input:
-        unpack(lambda wc: table_files(REPORT_TABLES)),
+        unpack(front_table_files),
     output:
         "results/report/tables.html",
     params:
         tables=REPORT_TABLES,
+        names=report_table_params(REPORT_TABLES),
         title="phiscene tables",
         fragment=True,
         version=V.REPORT,
@@ -40,7 +41,7 @@ rule report_front_tables:
 
 rule report_table:
     input:
-        unpack(lambda wc: table_files([wc.table])),
+        unpack(page_table_files),
     output:
         report(
             "results/report/tables/{table}.html",
@@ -51,7 +52,8 @@ rule report_table:
     wildcard_constraints:
         table=alternation(REPORT_TABLES),
     params:
-        tables=lambda wc: [wc.table],
+        tables=page_tables,
+        names=page_table_params,
         title="{table} table",
         fragment=False,
         version=V.REPORT,
@@ -82,6 +84,7 @@ rule report_bars:
         table=alternation(BAR_TABLES),
     params:
         table="{table}",
+        kind=bar_table_kind,
         version=V.REPORT,
     log:
         "results/logs/report/bars/{table}.log",
@@ -97,7 +100,7 @@ rule report_bars:
 
 rule report_drift:
     input:
-        unpack(lambda wc: table_inputs(DRIFT_FIGURES[wc.engine][1])),
+        unpack(drift_figure_inputs),
     output:
         report(
             "results/report/figures/drift_{engine}.png",
@@ -109,8 +112,8 @@ rule report_drift:
     wildcard_constraints:
         engine=alternation(list(DRIFT_FIGURES)),
     params:
-        methods=lambda wc: config["tables"][DRIFT_FIGURES[wc.engine][1]]["methods"],
-        section=lambda wc: DRIFT_FIGURES[wc.engine][0],
+        methods=drift_figure_methods,
+        section=drift_figure_section,
         seed=config["benchmark"]["seed"],
         version=V.REPORT,
     log:
@@ -128,7 +131,7 @@ rule report_drift:
 rule report_scene:
     input:
         initial="results/scenes/{suite}/{scene}/initial/scene.json",
-        method=lambda wc: method_scene(REPORT_METHOD, wc.suite, wc.scene),
+        method=report_method_scene,
         camera="results/scenes/{suite}/{scene}/reference/camera.json",
         topology=report_topology,
     output:
@@ -157,7 +160,7 @@ rule report_scene:
 
 rule report_viewer:
     input:
-        scene=lambda wc: method_scene(REPORT_METHOD, wc.suite, wc.scene),
+        scene=report_method_scene,
     output:
         report(
             "results/report/viewers/{suite}/{scene}.html",

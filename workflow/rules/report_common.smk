@@ -1,10 +1,24 @@
 # Helpers of the report rules (report.smk): which tables, figures and scenes the report shows.
 
-#: Tables the report shows (keys of phiscene.report.TABLES), in page order; the ones with a bar chart.
-REPORT_TABLES = ["phys", "crosssim", "recon", "topology", "ablation", "runtime"]
-BAR_TABLES = ["phys", "crosssim", "recon", "topology", "ablation"]
-#: Drift distributions: engine -> (metrics file section, the table whose suite and methods it shows).
-DRIFT_FIGURES = {"pybullet": ("physical", "phys"), "mujoco": ("mujoco", "crosssim")}
+#: Tables the report shows (default tables whose kind the report shows), in page order; the ones with a bar chart.
+REPORT_TABLES = [t for t in default_tables() if table_kind(t).report]
+BAR_TABLES = [t for t in REPORT_TABLES if table_kind(t).bar_columns()]
+
+
+def drift_figures():
+    """Drift distributions: simulator (phiscene.metrics.drift) -> (its metrics section, the first report table
+    reading that section, whose suite and methods the figure shows)."""
+    from phiscene.metrics.drift import SIMULATORS
+
+    out = {}
+    for name, sim in SIMULATORS.items():
+        shown = [t for t in REPORT_TABLES if sim.section in table_kind(t).metric_sections()]
+        if shown:
+            out[name] = (sim.section, shown[0])
+    return out
+
+
+DRIFT_FIGURES = drift_figures()
 REPORT_METHOD = config["report"]["method"]
 if REPORT_METHOD not in config["methods"]:
     raise ValueError(f"config: report.method: unknown method {REPORT_METHOD!r}; known: {sorted(config['methods'])}")
@@ -45,9 +59,63 @@ def report_targets():
     return out
 
 
+def report_table_params(tables):
+    """Kinds and report titles of tables (for names that are not their kind: a kind shown on another suite)."""
+    from phiscene.table_registry import heading_of
+
+    kinds = {t: table_kind(t).name for t in tables}
+    titles = {t: f"{table_kind(t).title} ({config['tables'][t]['suite']} suite)" for t in tables if kinds[t] != t}
+    return {"kinds": kinds, "titles": titles}
+
+
 def table_files(tables):
     """Named inputs of a table page: csv_<table> and md_<table> of each table."""
     return {
         **{f"csv_{t}": f"results/tables/{t}.csv" for t in tables},
         **{f"md_{t}": f"results/tables/{t}.md" for t in tables},
     }
+
+
+def front_table_files(wildcards):
+    """Named inputs of the report's front page: every report table."""
+    return table_files(REPORT_TABLES)
+
+
+def page_tables(wildcards):
+    """The one table of a table page."""
+    return [wildcards.table]
+
+
+def page_table_files(wildcards):
+    """Named inputs of a table page."""
+    return table_files(page_tables(wildcards))
+
+
+def page_table_params(wildcards):
+    """Kind and title of a table page's table."""
+    return report_table_params(page_tables(wildcards))
+
+
+def bar_table_kind(wildcards):
+    """The kind of a bar figure's table."""
+    return table_kind(wildcards.table).name
+
+
+def drift_figure_inputs(wildcards):
+    """Metrics files of the table a drift figure shows."""
+    return table_inputs(DRIFT_FIGURES[wildcards.engine][1])
+
+
+def drift_figure_methods(wildcards):
+    """Methods of the table a drift figure shows."""
+    return table_rows(DRIFT_FIGURES[wildcards.engine][1])
+
+
+def drift_figure_section(wildcards):
+    """The metrics section holding a drift figure's simulator."""
+    return DRIFT_FIGURES[wildcards.engine][0]
+
+
+def report_method_scene(wildcards):
+    """The report method's scene of a job's suite and scene."""
+    return method_scene(REPORT_METHOD, wildcards.suite, wildcards.scene)

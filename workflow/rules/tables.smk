@@ -1,17 +1,21 @@
-# Paper tables as CSV + Markdown, from the per-scene metrics files (the topology table scores the graphs itself).
+# Tables as CSV + Markdown: one generic rule for every table (phiscene.table_registry): a configured
+# `tables.<name>` entry of a registered kind, or a kind that needs no config (runtime). What the rule gathers
+# (metrics files, support graphs, benchmark TSVs) follows the kind.
 
 
-rule phys_table:
+rule table:
     input:
-        unpack(lambda wc: table_inputs("phys")),
+        unpack(table_rule_inputs),
     output:
-        csv="results/tables/phys.csv",
-        md="results/tables/phys.md",
+        csv="results/tables/{table}.csv",
+        md="results/tables/{table}.md",
+    wildcard_constraints:
+        table=alternation(table_names()),
     params:
-        methods=config["tables"]["phys"]["methods"],
+        spec=table_params,
         version=V.TABLES,
     log:
-        "results/logs/tables/phys.log",
+        "results/logs/tables/{table}.log",
     threads: 1
     resources:
         mem_mb=1000,
@@ -19,20 +23,22 @@ rule phys_table:
     conda:
         ENV
     script:
-        "../scripts/phys_table.py"
+        "../scripts/table.py"
 
 
-rule topology_table:
+rule table_scenes:
+    # per-(row, scene) values of the kinds that write them (the real-scene table)
     input:
-        unpack(topology_table_inputs),
+        unpack(table_rule_inputs),
     output:
-        csv="results/tables/topology.csv",
-        md="results/tables/topology.md",
+        "results/tables/{table}_scenes.csv",
+    wildcard_constraints:
+        table=alternation([t for t in table_names() if table_kind(t).scene_rows is not None]),
     params:
-        backends=config["tables"]["topology"]["backends"],
+        spec=table_params,
         version=V.TABLES,
     log:
-        "results/logs/tables/topology.log",
+        "results/logs/tables/{table}_scenes.log",
     threads: 1
     resources:
         mem_mb=1000,
@@ -40,113 +46,4 @@ rule topology_table:
     conda:
         ENV
     script:
-        "../scripts/topology_table.py"
-
-
-rule crosssim_table:
-    input:
-        unpack(lambda wc: table_inputs("crosssim")),
-    output:
-        csv="results/tables/crosssim.csv",
-        md="results/tables/crosssim.md",
-    params:
-        methods=config["tables"]["crosssim"]["methods"],
-        version=V.TABLES,
-    log:
-        "results/logs/tables/crosssim.log",
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=10,
-    conda:
-        ENV
-    script:
-        "../scripts/crosssim_table.py"
-
-
-rule recon_table:
-    input:
-        unpack(lambda wc: table_inputs("recon")),
-    output:
-        csv="results/tables/recon.csv",
-        md="results/tables/recon.md",
-    params:
-        methods=config["tables"]["recon"]["methods"],
-        version=V.TABLES,
-    log:
-        "results/logs/tables/recon.log",
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=10,
-    conda:
-        ENV
-    script:
-        "../scripts/recon_table.py"
-
-
-rule runtime_table:
-    input:
-        # every other table: their jobs wrote the benchmark TSVs this table reads
-        [f"results/tables/{t}.csv" for t in ("phys", "topology", "crosssim", "recon", "ablation")],
-    output:
-        csv="results/tables/runtime.csv",
-        md="results/tables/runtime.md",
-    params:
-        benchmarks="results/benchmarks",
-        version=V.TABLES,
-    log:
-        "results/logs/tables/runtime.log",
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=10,
-    conda:
-        ENV
-    script:
-        "../scripts/runtime_table.py"
-
-
-rule ablation_table:
-    input:
-        unpack(lambda wc: table_inputs("ablation")),
-    output:
-        csv="results/tables/ablation.csv",
-        md="results/tables/ablation.md",
-    params:
-        methods=config["tables"]["ablation"]["methods"],
-        version=V.TABLES,
-    log:
-        "results/logs/tables/ablation.log",
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=10,
-    conda:
-        ENV
-    script:
-        "../scripts/ablation_table.py"
-
-
-rule real_table:
-    # the real suite (config tables.real): rows initial, the imported peer result(s), every grounding variant
-    input:
-        unpack(real_table_inputs),
-    output:
-        csv="results/tables/real.csv",
-        md="results/tables/real.md",
-        scenes="results/tables/real_scenes.csv",
-    params:
-        methods=config["tables"].get("real", {}).get("methods", []),
-        scenes=real_table_scenes,
-        version=V.TABLES,
-    log:
-        "results/logs/tables/real.log",
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=10,
-    conda:
-        ENV
-    script:
-        "../scripts/real_table.py"
+        "../scripts/table.py"

@@ -5,4 +5,4 @@ from phiscene.runner import job
 
 sm = snakemake  # noqa: F821 (injected by Snakemake)
 with job(f"report bars {sm.params.table}", sm.log[0], sm.threads):
-    bars_figure(sm.params.table, sm.input[0], sm.output[0])
+    bars_figure(sm.params.table, sm.input[0], sm.output[0], kind=sm.params.kind)

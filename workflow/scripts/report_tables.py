@@ -7,4 +7,4 @@ sm = snakemake  # noqa: F821 (injected by Snakemake)
 with job("report tables " + " ".join(sm.params.tables), sm.log[0], sm.threads):
     tables_html({t: sm.input[f"csv_{t}"] for t in sm.params.tables}, sm.output[0],
                 title=sm.params.title, markdown={t: sm.input[f"md_{t}"] for t in sm.params.tables},
-                fragment=sm.params.fragment)
+                fragment=sm.params.fragment, kinds=sm.params.names["kinds"], titles=sm.params.names["titles"])

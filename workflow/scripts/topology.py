@@ -1,10 +1,12 @@
 """Snakemake script: support graph and placement order of one scene."""
 
 from phiscene.pipeline import run_topology
+from phiscene.plugins import load_plugins
 from phiscene.runner import job
 
 sm = snakemake  # noqa: F821 (injected by Snakemake)
 with job(f"topology {sm.wildcards.backend} {sm.wildcards.suite}/{sm.wildcards.scene}", sm.log[0], sm.threads,
          failure_outputs=sm.output):
+    load_plugins(sm.config.get("plugins"))  # registrations of config plugins, in this job's process
     run_topology(sm.input.scene, sm.output[0], sm.params.backend, dict(sm.params.settings),
                  given_path=sm.input.get("given"), attached=dict(sm.params.attached))

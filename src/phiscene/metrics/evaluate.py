@@ -6,17 +6,11 @@ sections the tables need of that scene, each computed by its own module::
     {"format": "phiscene.metrics/1", "sections": ["alignment", "physical"],
      "physical": {...}, "alignment": {...}}
 
-=============  ======================================================  ==========================
-section        metrics                                                  needs
-=============  ======================================================  ==========================
-``physical``   penetration, floating, pybullet drift                    proxies, ``sim``
-``mujoco``     MuJoCo drift (cross-simulator check)                     proxies, ``sim``
-``alignment``  mask IoU against the reference segmentation, pose change initial scene, reference dir
-``recon``      reconstruction against ground truth (MIDI-3D protocol)   ground-truth scene
-``pose``       displacement / rotation change from the input            initial scene
-``pose_gt``    the same, plus pose error (translation, rotation,        initial and ground-truth
-               ADD-S) against ground truth                              scenes
-=============  ======================================================  ==========================
+The sections are the entries of the registry :mod:`phiscene.metrics.sections` (``physical``: penetration,
+floating, pybullet drift; ``alignment``: mask IoU against the reference; ``recon``: MIDI-3D reconstruction
+against ground truth; ``pose`` / ``pose_gt``: displacement and rotation change from the input, and pose error
+against ground truth) and of the drift simulators of :mod:`phiscene.metrics.drift` (``mujoco``). Each names the
+settings and input files it reads; :func:`required_inputs` and :func:`section_settings` answer for a set of them.
 
 A method whose scenes live in another frame (config ``frame: own``, e.g. an imported peer's result in its own
 levelled frame) is compared after the best rigid alignment of its object centres (``MetricTask.align``).
@@ -42,19 +36,14 @@ from phiscene.failures import is_failure_record
 log = logging.getLogger(__name__)
 
 FORMAT = "phiscene.metrics/1"
-#: Sections of a metrics file, in the order they are computed.
-SECTIONS = ("physical", "mujoco", "alignment", "recon", "pose", "pose_gt")
-#: Settings each section reads (keys of the ``settings`` mapping of :func:`scene_metrics`).
-SECTION_SETTINGS = {"physical": ("physical", "sim"), "mujoco": ("physical", "sim", "mujoco"),
-                    "alignment": ("alignment",), "recon": ("recon",), "pose": ("pose",), "pose_gt": ("pose",)}
-#: Input files each section reads (fields of :class:`MetricInputs`).
-SECTION_INPUTS = {"physical": ("proxies", "cache_dir"), "mujoco": ("proxies",),
-                  "alignment": ("initial", "reference_dir"), "recon": ("gt",), "pose": ("initial",),
-                  "pose_gt": ("initial", "gt")}
-#: Sections each paper table (:mod:`phiscene.tables`) reads from the metrics files of the methods it shows.
-TABLE_SECTIONS = {"phys": ("physical", "pose_gt"), "crosssim": ("physical", "mujoco"),
-                  "ablation": ("physical", "alignment", "pose_gt"),
-                  "recon": ("recon",), "real": ("physical", "mujoco", "pose")}
+
+
+def section_names() -> list[str]:
+    """The registered metric sections, in computing order (:data:`phiscene.metrics.sections.SECTIONS`)."""
+    import phiscene.metrics.drift  # noqa: F401  (registers the simulators' sections)
+    from phiscene.metrics.sections import SECTIONS
+
+    return list(SECTIONS)
 
 
 @dataclass(frozen=True)
@@ -70,7 +59,7 @@ class MetricTask:
     out
         The metrics file to write.
     sections
-        Its sections (:data:`SECTIONS`).
+        Its sections (:func:`section_names`).
     proxies
         The method's own proxies (methods that bring their own meshes); ``None`` = the scene's shared ones.
     align
@@ -112,17 +101,27 @@ class MetricInputs:
 
 def check_sections(sections: list[str] | tuple[str, ...] | set[str]) -> list[str]:
     """The requested sections in computing order; ``ValueError`` naming an unknown or missing one."""
-    unknown = sorted(set(sections) - set(SECTIONS))
+    known = section_names()
+    unknown = sorted(set(sections) - set(known))
     if unknown:
-        raise ValueError(f"unknown metric sections {unknown}; known: {list(SECTIONS)}")
+        raise ValueError(f"unknown metric sections {unknown}; known: {known}")
     if not sections:
         raise ValueError("no metric sections requested")
-    return [s for s in SECTIONS if s in sections]
+    return [s for s in known if s in sections]
 
 
 def required_inputs(sections: list[str] | tuple[str, ...]) -> list[str]:
     """Names of the :class:`MetricInputs` fields that ``sections`` need."""
-    return sorted({name for s in check_sections(sections) for name in SECTION_INPUTS[s]})
+    from phiscene.metrics.sections import SECTIONS
+
+    return sorted({name for s in check_sections(sections) for name in SECTIONS[s].inputs})
+
+
+def section_settings(sections: list[str] | tuple[str, ...]) -> list[str]:
+    """Names of the settings (``sim``, keys of the ``metrics`` config section) that ``sections`` read."""
+    from phiscene.metrics.sections import SECTIONS
+
+    return sorted({name for s in check_sections(sections) for name in SECTIONS[s].settings})
 
 
 def scene_metrics(scene_path: str | Path, sections: list[str] | tuple[str, ...], inputs: MetricInputs,
@@ -134,12 +133,12 @@ def scene_metrics(scene_path: str | Path, sections: list[str] | tuple[str, ...],
     scene_path
         The method's ``scene.json``.
     sections
-        Any of :data:`SECTIONS`.
+        Any of :func:`section_names`.
     inputs
         The other files the sections read (see :func:`required_inputs`).
     settings
-        Per settings name (``physical``, ``sim``, ``mujoco``, ``alignment``, ``recon``) the mapping for
-        that parameter dataclass' ``from_dict``; a missing one takes the defaults.
+        Per settings name (:func:`section_settings`: ``physical``, ``sim``, ``mujoco``, ``alignment``, ...) the
+        mapping for that parameter dataclass' ``from_dict``; a missing one takes the defaults.
     align
         Pose sections compare after the best rigid alignment of the object centres (a method in its own frame).
 
@@ -155,59 +154,20 @@ def scene_metrics(scene_path: str | Path, sections: list[str] | tuple[str, ...],
     phiscene.errors.PhisceneError
         Bad scene data (the workflow records it as a failed scene).
     """
-    from phiscene.proxies import read_proxies
+    from phiscene.metrics.sections import SECTIONS, SectionContext
     from phiscene.scene import load_scene
-    from phiscene.sim.settings import SimSettings
 
     order = check_sections(sections)
     missing = [name for name in required_inputs(order) if getattr(inputs, name) is None]
     if missing:
         raise ValueError(f"metric sections {order} need {missing}")
-    scene = load_scene(scene_path)
+    ctx = SectionContext(load_scene(scene_path), inputs, settings, align)
     out: dict = {"format": FORMAT, "sections": order}
-    proxies = read_proxies(inputs.proxies) if "proxies" in required_inputs(order) else None
-    sim = SimSettings.from_dict(settings.get("sim", {}))
-    if "physical" in order or "mujoco" in order:
-        from phiscene.metrics.physical import PhysicalParams
-
-        physical = PhysicalParams.from_dict(settings.get("physical", {}))
-    if "physical" in order:
-        from phiscene.metrics.physical import physical_metrics
-
-        r = out["physical"] = physical_metrics(scene, proxies, physical, sim, Path(inputs.cache_dir))
-        log.info("physical: pen %.4f m, float %.4f m, drift %.4f m / %.2f deg", r["pen_depth"], r["float_dist"],
-                 r["drift_trans"], r["drift_rot"])
-    if "mujoco" in order:
-        from phiscene.sim.mujoco import MujocoParams, drift_mujoco
-
-        mj = MujocoParams.from_dict(settings.get("mujoco", {}))
-        r = out["mujoco"] = drift_mujoco(scene, proxies, physical, sim, mj)
-        log.info("mujoco: drift %.4f m / %.2f deg", r["drift_trans"], r["drift_rot"])
-    if "alignment" in order:
-        from phiscene.metrics.alignment import AlignmentParams, alignment_metrics
-
-        r = out["alignment"] = alignment_metrics(scene, load_scene(inputs.initial), Path(inputs.reference_dir),
-                                                 AlignmentParams.from_dict(settings.get("alignment", {})))
-        log.info("alignment: mask IoU %.3f, pose change %.4f m / %.2f deg", r["mask_iou"], r["pose_change_trans"],
-                 r["pose_change_rot"])
-    if "recon" in order:
-        from phiscene.metrics.reconstruction import ReconParams, reconstruction_metrics
-
-        r = out["recon"] = reconstruction_metrics(scene, load_scene(inputs.gt),
-                                                  ReconParams.from_dict(settings.get("recon", {})))
-        log.info("recon: scene CD %.4f, F %.3f, object CD %.4f, F %.3f, bbox IoU %.3f", r["scene_cd"],
-                 r["scene_fscore"], r["object_cd"], r["object_fscore"], r["bbox_iou"])
-    if "pose" in order or "pose_gt" in order:
-        from phiscene.metrics.pose import PoseParams, pose_metrics
-
-        pp = PoseParams.from_dict(settings.get("pose", {}))
-        initial = load_scene(inputs.initial)
-        for sec in [s for s in ("pose", "pose_gt") if s in order]:
-            gt = load_scene(inputs.gt) if sec == "pose_gt" else None
-            r = out[sec] = {**pose_metrics(scene, initial, gt, align, pp.samples, pp.seed),
-                            "attached": len(scene.attached_ids)}
-            log.info("%s: displacement %.4f m (max %.4f), rotation change %.2f deg (max %.2f)", sec,
-                     r["displacement_mean"], r["displacement_max"], r["rotation_mean"], r["rotation_max"])
+    for name in order:
+        section = SECTIONS[name]
+        r = out[name] = section.compute(ctx)
+        if section.summary is not None:
+            log.info("%s: %s", name, section.summary(r))
     return out
 
 
@@ -219,7 +179,7 @@ def read_section(data: dict, section: str, path: str | Path | None = None) -> di
     data
         The parsed JSON of a metrics file.
     section
-        One of :data:`SECTIONS`.
+        One of :func:`section_names`.
     path
         The file, for the error message.
 

@@ -5,14 +5,14 @@
 rule baseline_external:
     input:
         initial="results/scenes/{suite}/{scene}/initial/scene.json",
-        prediction=lambda wc: config["methods"][wc.method]["path"].format(suite=wc.suite, scene=wc.scene),
+        prediction=external_prediction,
     output:
         scene="results/methods/{method}/{suite}/{scene}/scene.json",
         log_json="results/methods/{method}/{suite}/{scene}/import.json",
     wildcard_constraints:
         method=alternation(methods_of_kind("external")),
     params:
-        settings=lambda wc: config["methods"][wc.method].get("params", {}),
+        settings=baseline_settings,
         version=V.GROUND,
     log:
         "results/logs/methods/{method}/{suite}/{scene}.log",

@@ -1,18 +1,19 @@
-# Baseline joint_sdf_sim: Joint SDF, then all objects simulated together to rest (paper Tab. 6).
+# Baselines registered in phiscene.baselines.registry (the paper's Tab. 6 ones: joint_sdf, joint_sim,
+# joint_sdf_sim, lift_sim): one rule for every method whose kind is registered. Its inputs follow the entry:
+# the initial scene, plus the scene's proxies and the method's topology graph when the baseline needs them.
 
 
-rule baseline_joint_sdf_sim:
+rule baseline:
     input:
-        scene="results/scenes/{suite}/{scene}/initial/scene.json",
-        proxies="results/proxies/{suite}/{scene}.npz",
+        unpack(baseline_inputs),
     output:
         scene="results/methods/{method}/{suite}/{scene}/scene.json",
         log_json="results/methods/{method}/{suite}/{scene}/baseline.json",
     wildcard_constraints:
-        method=alternation(methods_of_kind("joint_sdf_sim")),
+        method=alternation(registered_baseline_methods()),
     params:
-        kind="joint_sdf_sim",
-        settings=lambda wc: config["methods"][wc.method].get("params", {}),
+        kind=method_kind,
+        settings=baseline_settings,
         sim=config["sim"],
         cache_dir=CACHE,
         version=V.GROUND,
@@ -27,4 +28,4 @@ rule baseline_joint_sdf_sim:
     conda:
         ENV
     script:
-        "../../scripts/baseline.py"
+        "../scripts/baseline.py"
