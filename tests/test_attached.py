@@ -9,10 +9,10 @@ import trimesh
 from phiscene import topology
 from phiscene.assembly import AssemblyParams, ground_scene
 from phiscene.meshes import save_mesh
+from phiscene.metrics.drift import drift_mujoco
 from phiscene.metrics.physical import PhysicalParams, physical_metrics
 from phiscene.proxies import ProxyParams, scene_proxies
 from phiscene.scene import Scene, SceneObject
-from phiscene.sim.mujoco import drift_mujoco
 from phiscene.sim.settings import SimSettings
 from phiscene.topology.attached import AttachedParams, attached_ids, attached_objects, says_mounted
 from phiscene.transforms import make_pose

@@ -120,24 +120,24 @@ def test_urdf_inertial_is_closed_form_box_inertia(bridge):
 
 
 def test_urdf_scene_in_fresh_pybullet_world_has_the_scene_poses_and_mass(bridge):
-    import pybullet as p
+    from phiscene.sim.bullet import open_client
 
-    client = p.connect(p.DIRECT)
+    client = open_client()
     try:
         uids = ex.load_urdf_scene(bridge["out"] / "scene_urdf.json", client)
         assert set(uids) == {"ground", "box_a", "box_b", "plank"}
         for o in bridge["scene"].objects:
-            mass, _, inertia_diag = p.getDynamicsInfo(uids[o.id], -1, physicsClientId=client)[:3]
+            mass, _, inertia_diag = client.getDynamicsInfo(uids[o.id], -1)[:3]
             ext = o.mesh().extents * (PLANK_SCALE if o.id == "plank" else 1.0)
             assert mass == pytest.approx(SIM.density * np.prod(ext), rel=1e-9)
             expected = np.sort(np.diag(_box_inertia(ext, mass)))
             np.testing.assert_allclose(np.sort(inertia_diag), expected, rtol=1e-6)
-            pos, _ = p.getBasePositionAndOrientation(uids[o.id], physicsClientId=client)
+            pos, _ = client.getBasePositionAndOrientation(uids[o.id])
             np.testing.assert_allclose(pos, o.pose[:3, 3], atol=1e-9)  # box centre = centre of mass
-            friction = p.getDynamicsInfo(uids[o.id], -1, physicsClientId=client)[1]
+            friction = client.getDynamicsInfo(uids[o.id], -1)[1]
             assert friction == pytest.approx(SIM.friction)
     finally:
-        p.disconnect(physicsClientId=client)
+        client.disconnect()
 
 
 def test_glb_reloaded_with_trimesh_equals_world_meshes(bridge):

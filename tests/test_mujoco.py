@@ -10,6 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from phiscene.errors import InputError
 from phiscene.meshes import save_mesh
+from phiscene.metrics.drift import drift_mujoco
 from phiscene.proxies import ProxyParams, proxy_for_mesh
 from phiscene.scene import Scene, SceneObject, load_scene, save_scene
 from phiscene.sim import mujoco as pm
@@ -56,14 +57,14 @@ def test_box_at_rest_has_no_drift(tmp_path):
     box = trimesh.creation.box([0.2, 0.3, 0.1])
     # scaled, turned, and far above scene.ground_height: the protocol's ground goes right below it
     scene, proxies = make_scene(tmp_path, [("box", box, resting(box, rotation_z(0.4), (0.1, 0.2), 0.5, 1.5))])
-    out = pm.drift_mujoco(scene, proxies, PROTOCOL, SIM)
+    out = drift_mujoco(scene, proxies, PROTOCOL, SIM)
     assert set(out) == {"drift_trans", "drift_rot", "ground_below", "objects"}
     assert out["ground_below"] == pytest.approx(0.5, abs=1e-9)
     assert out["objects"]["box"]["drift_trans"] < 1e-3
     assert out["objects"]["box"]["drift_rot"] < 0.5
     assert out["drift_trans"] == out["objects"]["box"]["drift_trans"]
     # a 2 cm lift: the box falls back onto the ground, and the lift is not counted as drift
-    lifted = pm.drift_mujoco(scene, proxies, SimpleNamespace(upward_offset=0.02, frames=120), SIM)
+    lifted = drift_mujoco(scene, proxies, SimpleNamespace(upward_offset=0.02, frames=120), SIM)
     assert lifted["drift_trans"] < 1e-3
 
 
@@ -122,7 +123,7 @@ def test_box_on_its_edge_topples(tmp_path):
     box = trimesh.creation.box([0.1, 0.1, 0.4])
     R = Rotation.from_euler("x", 30, degrees=True).as_matrix()
     scene, proxies = make_scene(tmp_path, [("box", box, resting(box, R))])
-    out = pm.drift_mujoco(scene, proxies, PROTOCOL, SIM)
+    out = drift_mujoco(scene, proxies, PROTOCOL, SIM)
     assert out["drift_rot"] > 30.0
     assert out["drift_rot"] == pytest.approx(60.0, abs=5.0)
     assert out["drift_trans"] > 0.05
@@ -132,7 +133,7 @@ def test_two_box_stack_stays(tmp_path):
     base, top = trimesh.creation.box([0.3, 0.3, 0.1]), trimesh.creation.box([0.2, 0.2, 0.1])
     scene, proxies = make_scene(tmp_path, [("base", base, make_pose(translation=[0, 0, 0.05])),
                                            ("top", top, make_pose(rotation_z(0.3), [0.02, 0.0, 0.15]))])
-    out = pm.drift_mujoco(scene, proxies, PROTOCOL, SIM)
+    out = drift_mujoco(scene, proxies, PROTOCOL, SIM)
     for name in ("base", "top"):
         assert out["objects"][name]["drift_trans"] < 1e-3
         assert out["objects"][name]["drift_rot"] < 0.5

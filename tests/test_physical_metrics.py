@@ -11,11 +11,11 @@ import trimesh
 
 from phiscene.errors import InputError
 from phiscene.meshes import save_mesh
+from phiscene.metrics.drift import drift_bullet
 from phiscene.metrics.physical import (
     PhysicalParams,
     box_gaps,
     contact_validity,
-    drift_bullet,
     object_seed,
     physical_metrics,
 )

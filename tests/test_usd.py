@@ -11,7 +11,8 @@ from phiscene.inertia import rigid_props
 from phiscene.io.export import RoundTripTolerance
 from phiscene.io.usd import export_usd, read_usd_scene, release_usd, validate_usd, validator_names
 from phiscene.meshes import save_mesh
-from phiscene.metrics.physical import PhysicalParams, drift_bullet
+from phiscene.metrics.drift import drift_bullet
+from phiscene.metrics.physical import PhysicalParams
 from phiscene.proxies import ProxyParams, scene_proxies
 from phiscene.scene import Scene, SceneObject
 from phiscene.sim.settings import SimSettings

@@ -14,11 +14,12 @@ import yaml
 torch.set_num_threads(1)
 from phiscene import topology
 from phiscene.assembly import AssemblyParams, ground_scene
+from phiscene.metrics.drift import drift_mujoco
 from phiscene.metrics.physical import PhysicalParams, physical_metrics
 from phiscene.metrics.pose import pose_metrics
 from phiscene.proxies import ProxyParams, scene_proxies
 from phiscene.scene import load_scene
-from phiscene.sim.mujoco import MujocoParams, drift_mujoco
+from phiscene.sim.mujoco import MujocoParams
 from phiscene.sim.settings import SimSettings
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -164,8 +164,6 @@ def throw_ball(index_path: str | Path, params: DemoParams, render=None) -> DemoR
     """
     from dataclasses import replace
 
-    import pybullet as p
-
     from phiscene.bench.render import RenderParams, fit_distance, look_at_camera
     from phiscene.io.export import load_urdf_scene, read_urdf_index
 
@@ -173,14 +171,16 @@ def throw_ball(index_path: str | Path, params: DemoParams, render=None) -> DemoR
     index = read_urdf_index(index_path)
     contact = index.get("contact", {})
     time_step = float(index["physics"]["time_step"])
-    client = p.connect(p.DIRECT)
+    from phiscene.sim.bullet import open_client
+
+    client = open_client()
     try:
         uids = load_urdf_scene(index_path, client)
         bodies = {k: v for k, v in uids.items() if k != "ground"}
-        boxes = {k: np.asarray(p.getAABB(uid, physicsClientId=client), dtype=float) for k, uid in bodies.items()}
+        boxes = {k: np.asarray(client.getAABB(uid), dtype=float) for k, uid in bodies.items()}
 
         def com(uid: int) -> np.ndarray:
-            return np.asarray(p.getBasePositionAndOrientation(uid, physicsClientId=client)[0], dtype=float)
+            return np.asarray(client.getBasePositionAndOrientation(uid)[0], dtype=float)
 
         if params.target == "top":
             target_id = max(boxes, key=lambda k: boxes[k][1, 2])
@@ -201,15 +201,14 @@ def throw_ball(index_path: str | Path, params: DemoParams, render=None) -> DemoR
         v0 = launch_velocity(start, target, distance / params.speed)
 
         mass = params.ball_density * 4.0 / 3.0 * math.pi * radius**3
-        col = p.createCollisionShape(p.GEOM_SPHERE, radius=radius, physicsClientId=client)
-        vis = p.createVisualShape(p.GEOM_SPHERE, radius=radius, rgbaColor=[c / 255 for c in BALL_RGB] + [1.0],
-                                  physicsClientId=client)
-        ball = p.createMultiBody(mass, col, vis, basePosition=start.tolist(), physicsClientId=client)
-        p.changeDynamics(ball, -1, lateralFriction=contact.get("lateral_friction", 0.8),
-                         rollingFriction=contact.get("rolling_friction", 0.0),
-                         spinningFriction=contact.get("spinning_friction", 0.0),
-                         restitution=contact.get("restitution", 0.0), physicsClientId=client)
-        p.resetBaseVelocity(ball, v0.tolist(), [0, 0, 0], physicsClientId=client)
+        col = client.createCollisionShape(client.GEOM_SPHERE, radius=radius)
+        vis = client.createVisualShape(client.GEOM_SPHERE, radius=radius, rgbaColor=[c / 255 for c in BALL_RGB] + [1.0])
+        ball = client.createMultiBody(mass, col, vis, basePosition=start.tolist())
+        client.changeDynamics(ball, -1, lateralFriction=contact.get("lateral_friction", 0.8),
+                              rollingFriction=contact.get("rolling_friction", 0.0),
+                              spinningFriction=contact.get("spinning_friction", 0.0),
+                              restitution=contact.get("restitution", 0.0))
+        client.resetBaseVelocity(ball, v0.tolist(), [0, 0, 0])
 
         # camera: the benchmark's oblique view, framing the objects and the ball's launch point
         view_lo = np.minimum(lo, start - radius)
@@ -230,18 +229,18 @@ def throw_ball(index_path: str | Path, params: DemoParams, render=None) -> DemoR
         for k in range(n_frames):
             if k:
                 for _ in range(stride):
-                    p.stepSimulation(physicsClientId=client)
-            _, _, px, _, _ = p.getCameraImage(
+                    client.stepSimulation()
+            _, _, px, _, _ = client.getCameraImage(
                 render.width, render.height, viewMatrix=camera["pybullet"]["view_matrix"],
-                projectionMatrix=camera["pybullet"]["projection_matrix"], renderer=p.ER_TINY_RENDERER,
-                shadow=int(render.shadow), lightDirection=list(render.light_direction), physicsClientId=client)
+                projectionMatrix=camera["pybullet"]["projection_matrix"], renderer=client.ER_TINY_RENDERER,
+                shadow=int(render.shadow), lightDirection=list(render.light_direction))
             frames.append(np.asarray(px, dtype=np.uint8).reshape(render.height, render.width, 4)[:, :, :3])
             times.append(k * stride * time_step)
             ball_path.append(com(ball))
             for oid, uid in bodies.items():
                 paths[oid].append(com(uid))
     finally:
-        p.disconnect(physicsClientId=client)
+        client.disconnect()
     return DemoResult(frames=np.stack(frames), times=np.asarray(times), ball=np.asarray(ball_path),
                       objects={k: np.asarray(v) for k, v in paths.items()}, camera=camera, ball_radius=float(radius),
                       launch_velocity=v0, target=target_id)

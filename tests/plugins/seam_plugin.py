@@ -24,7 +24,8 @@ COARSE = {"solver_iterations": 12, "substeps": 2}
 
 def coarse_drift(ctx):
     """pybullet drift of the scene with :data:`COARSE` solver settings."""
-    from phiscene.metrics.physical import PhysicalParams, drift_bullet
+    from phiscene.metrics.drift import drift_bullet
+    from phiscene.metrics.physical import PhysicalParams
 
     return drift_bullet(ctx.scene, ctx.proxies(), ctx.params(PhysicalParams, "physical"),
                         replace(ctx.sim(), **COARSE), ctx.cache_dir())

@@ -465,7 +465,8 @@ def _joint_check(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, cach
     Adds ``joint_drift`` (m, deg) and ``joint_stable`` (within ``joint_tol`` / ``joint_tol_deg``) to each
     object's certificate: sequential settling tests each object against a frozen context only.
     """
-    from phiscene.metrics.physical import PhysicalParams, drift_bullet
+    from phiscene.metrics.drift import drift_bullet
+    from phiscene.metrics.physical import PhysicalParams
 
     drift = drift_bullet(scene, proxies, PhysicalParams(upward_offset=0.0, frames=fp.joint_frames), sim, cache_dir)
     for oid, d in drift["objects"].items():

@@ -157,10 +157,7 @@ class _Window:
 
 
 def _set_damping(world: BulletWorld, name: str, linear: float, angular: float) -> None:
-    import pybullet as p
-
-    p.changeDynamics(world.bodies[name].uid, -1, linearDamping=linear, angularDamping=angular,
-                     physicsClientId=world.client)
+    world.set_dynamics(name, linearDamping=linear, angularDamping=angular)
 
 
 def settle_object(world: BulletWorld, name: str, params: SettleParams) -> SettleResult:

@@ -3,7 +3,7 @@
 All objects are released together as dynamic compounds of their convex
 proxies (mass properties at ``SimSettings.density``) in one
 :class:`~phiscene.sim.bullet.BulletWorld` with a ground box whose top is
-``scene.ground_height``, as :func:`phiscene.metrics.physical.drift_bullet`
+``scene.ground_height``, as :func:`phiscene.metrics.drift.drift_bullet`
 releases a scene, but without the upward offset and with a stopping rule:
 after every frame ``n >= w`` the paper's sliding-window criterion
 

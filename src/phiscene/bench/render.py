@@ -245,29 +245,28 @@ def render(scene: Scene, camera: dict, colors: list | None = None, shadow: bool 
     labels : (H, W) int32
         Index of the visible object in ``scene.objects``, -1 for ground and background.
     """
-    import pybullet as p
-
     W, H = int(camera["width"]), int(camera["height"])
-    client = p.connect(p.DIRECT)
+    from phiscene.sim.bullet import open_client
+
+    client = open_client()
     try:
         uids = {}
         with tempfile.TemporaryDirectory(prefix="phiscene-render-") as tmp:
-            ground = p.createVisualShape(p.GEOM_BOX, halfExtents=[50, 50, 0.05], rgbaColor=[*GROUND_RGB, 1],
-                                         physicsClientId=client)
-            p.createMultiBody(0, -1, ground, basePosition=[0, 0, scene.ground_height - 0.05], physicsClientId=client)
+            ground = client.createVisualShape(client.GEOM_BOX, halfExtents=[50, 50, 0.05], rgbaColor=[*GROUND_RGB, 1])
+            client.createMultiBody(0, -1, ground, basePosition=[0, 0, scene.ground_height - 0.05])
             for k, o in enumerate(scene.objects):
                 rgb = (colors[k] if colors is not None else o.meta.get("rgb") or o.color or (150, 150, 150))
                 f = Path(tmp) / f"{k}.obj"
                 _flat_obj(o.world_mesh(), f)
-                vis = p.createVisualShape(p.GEOM_MESH, fileName=str(f), rgbaColor=[c / 255 for c in rgb] + [1],
-                                          physicsClientId=client)
-                uids[p.createMultiBody(0, -1, vis, physicsClientId=client)] = k
-            _, _, px, _, seg = p.getCameraImage(
+                vis = client.createVisualShape(client.GEOM_MESH, fileName=str(f),
+                                               rgbaColor=[c / 255 for c in rgb] + [1])
+                uids[client.createMultiBody(0, -1, vis)] = k
+            _, _, px, _, seg = client.getCameraImage(
                 W, H, viewMatrix=camera["pybullet"]["view_matrix"],
-                projectionMatrix=camera["pybullet"]["projection_matrix"], renderer=p.ER_TINY_RENDERER,
-                shadow=int(shadow), lightDirection=list(light_direction), physicsClientId=client)
+                projectionMatrix=camera["pybullet"]["projection_matrix"], renderer=client.ER_TINY_RENDERER,
+                shadow=int(shadow), lightDirection=list(light_direction))
     finally:
-        p.disconnect(physicsClientId=client)
+        client.disconnect()
     rgb = np.asarray(px, dtype=np.uint8).reshape(H, W, 4)[:, :, :3].copy()
     seg = np.asarray(seg, dtype=np.int64).reshape(H, W)
     labels = np.full((H, W), -1, dtype=np.int32)

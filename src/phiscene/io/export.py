@@ -393,8 +393,8 @@ def read_urdf_index(path: str | Path) -> dict:
     return index
 
 
-def load_urdf_scene(index_path: str | Path, client: int) -> dict[str, int]:
-    """Load an exported URDF scene into pybullet client ``client`` (world settings included).
+def load_urdf_scene(index_path: str | Path, client) -> dict[str, int]:
+    """Load an exported URDF scene into a fresh pybullet client (:func:`phiscene.sim.bullet.open_client`).
 
     Sets gravity, the time step and solver iterations, loads the ground (fixed)
     and every object URDF at its index pose with ``URDF_USE_INERTIA_FROM_FILE``,
@@ -404,27 +404,25 @@ def load_urdf_scene(index_path: str | Path, client: int) -> dict[str, int]:
     -------
     ``{id: body unique id}``, the ground under ``"ground"``.
     """
-    import pybullet as p
+    from phiscene.sim.bullet import configure_engine
 
     index_path = Path(index_path)
     index = read_urdf_index(index_path)
     root = index_path.parent
     ph = index["physics"]
-    p.setGravity(*index["gravity"], physicsClientId=client)
-    p.setPhysicsEngineParameter(fixedTimeStep=ph["time_step"], numSolverIterations=ph["solver_iterations"],
-                                deterministicOverlappingPairs=1, numSubSteps=0, physicsClientId=client)
+    configure_engine(client, ph["time_step"], ph["solver_iterations"], index["gravity"])
     g = index["ground"]
-    uids = {"ground": p.loadURDF(str(root / g["urdf"]), g["position"], g["orientation_xyzw"], useFixedBase=True,
-                                 physicsClientId=client)}
+    uids = {"ground": client.loadURDF(str(root / g["urdf"]), g["position"], g["orientation_xyzw"],
+                                      useFixedBase=True)}
     dyn = index["dynamics"]
     for i, o in enumerate(index["objects"]):
         try:
-            uid = p.loadURDF(str(root / o["urdf"]), o["position"], o["orientation_xyzw"],
-                             flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=client)
-        except p.error as exc:
+            uid = client.loadURDF(str(root / o["urdf"]), o["position"], o["orientation_xyzw"],
+                                  flags=client.URDF_USE_INERTIA_FROM_FILE)
+        except client.error as exc:
             raise InputError(index_path, f"objects[{i}].urdf", f"pybullet cannot load it ({exc})") from None
-        p.changeDynamics(uid, -1, linearDamping=dyn["linear_damping"], angularDamping=dyn["angular_damping"],
-                         collisionMargin=dyn["collision_margin"], physicsClientId=client)
+        client.changeDynamics(uid, -1, linearDamping=dyn["linear_damping"], angularDamping=dyn["angular_damping"],
+                              collisionMargin=dyn["collision_margin"])
         uids[o["id"]] = uid
     return uids
 
@@ -628,16 +626,16 @@ def release_urdf(index_path: str | Path, seconds: float, upward_offset: float = 
 
     Every object is lifted by ``upward_offset``, the world runs ``seconds``
     (rounded to whole time steps), and the drift is measured as in
-    :func:`phiscene.metrics.physical.drift_bullet`: centre of mass from before
+    :func:`phiscene.metrics.drift.drift_bullet`: centre of mass from before
     the lift, rotation angle in degrees.
 
     Returns
     -------
     ``{"drift_trans": mean m, "drift_rot": mean deg, "steps": int, "objects": {id: {...}}}``
     """
-    import pybullet as p
+    from phiscene.sim.bullet import open_client
 
-    client = p.connect(p.DIRECT)
+    client = open_client()
     try:
         uids = load_urdf_scene(index_path, client)
         bodies = {k: v for k, v in uids.items() if k != "ground"}
@@ -646,21 +644,20 @@ def release_urdf(index_path: str | Path, seconds: float, upward_offset: float = 
         def poses() -> dict[str, np.ndarray]:
             out = {}
             for oid, uid in bodies.items():
-                pos, quat = p.getBasePositionAndOrientation(uid, physicsClientId=client)
+                pos, quat = client.getBasePositionAndOrientation(uid)
                 out[oid] = make_pose(quat_xyzw_to_matrix(quat), pos)
             return out
 
         for uid in bodies.values():
-            pos, quat = p.getBasePositionAndOrientation(uid, physicsClientId=client)
-            p.resetBasePositionAndOrientation(uid, [pos[0], pos[1], pos[2] + upward_offset], quat,
-                                              physicsClientId=client)
+            pos, quat = client.getBasePositionAndOrientation(uid)
+            client.resetBasePositionAndOrientation(uid, [pos[0], pos[1], pos[2] + upward_offset], quat)
         start = poses()
         steps = int(round(seconds / time_step))
         for _ in range(steps):
-            p.stepSimulation(physicsClientId=client)
+            client.stepSimulation()
         end = poses()
     finally:
-        p.disconnect(physicsClientId=client)
+        client.disconnect()
     return {**_drift(start, end, upward_offset), "steps": steps}
 
 
@@ -717,8 +714,8 @@ def roundtrip_check(export_dir: str | Path, scene: "Scene", proxies: dict[str, "
     another fresh pybullet world (:func:`phiscene.io.usd.release_usd`), each for
     ``params.frames * sim.frame_dt`` seconds after a lift of
     ``params.upward_offset``; the pipeline's drifts are
-    :func:`phiscene.metrics.physical.drift_bullet` and
-    :func:`phiscene.sim.mujoco.drift_mujoco` of the same scene and proxies.
+    :func:`phiscene.metrics.drift.drift_bullet` and
+    :func:`phiscene.metrics.drift.drift_mujoco` of the same scene and proxies.
 
     Parameters
     ----------
@@ -731,8 +728,7 @@ def roundtrip_check(export_dir: str | Path, scene: "Scene", proxies: dict[str, "
     engine entry has ``export``, ``pipeline``, ``max_diff_trans`` (m), ``max_diff_rot`` (deg), ``ok``.
     """
     from phiscene.io.usd import release_usd
-    from phiscene.metrics.physical import drift_bullet
-    from phiscene.sim.mujoco import drift_mujoco
+    from phiscene.metrics.drift import drift_bullet, drift_mujoco
 
     export_dir = Path(export_dir)
     seconds = int(params.frames) * sim.frame_dt

@@ -23,7 +23,7 @@ graph and the world settings are JSON strings in the layer's ``customLayerData``
 
 :func:`read_usd_scene` reads a stage back with ``pxr`` (poses, masses, inertia, hull vertices, static flags, units);
 :func:`release_usd` rebuilds a fresh pybullet world from what it read and measures the drift with the protocol of
-:func:`phiscene.metrics.physical.drift_bullet`; :func:`validate_usd` runs USD's own validators (``UsdValidation``,
+:func:`phiscene.metrics.drift.drift_bullet`; :func:`validate_usd` runs USD's own validators (``UsdValidation``,
 the UsdPhysics ones included).
 """
 
@@ -283,7 +283,7 @@ def release_usd(path: str | Path, seconds: float, upward_offset: float = 0.0, ca
     colliders; the ground is the re-read ground height; the world settings come from the stage (friction and
     restitution from its physics material, the rest from ``phiscene:sim``, or ``sim``). Every free body is lifted
     by ``upward_offset`` and the world runs ``seconds``; drift as in
-    :func:`phiscene.metrics.physical.drift_bullet` (centre of mass from before the lift, rotation in degrees).
+    :func:`phiscene.metrics.drift.drift_bullet` (centre of mass from before the lift, rotation in degrees).
 
     Returns
     -------

@@ -35,7 +35,7 @@ Post-simulation drift (pybullet)
     drift is the distance between the final centre of mass and the original
     one (the lifted one minus the offset); rotation drift is the relative
     rotation angle in degrees. Scene values are means over objects. The MuJoCo
-    counterpart is :func:`phiscene.sim.mujoco.drift_mujoco`.
+    counterpart is :func:`phiscene.metrics.drift.drift_mujoco`.
 
 Attached objects (:attr:`phiscene.scene.SceneObject.attached`: fixed to a wall, the ceiling or the ground) are
 static colliders in both simulators, are not lifted, and are left out of the drift and floating means (their
@@ -58,7 +58,6 @@ from phiscene.errors import InputError
 from phiscene.meshes import sample_surface
 from phiscene.params import Params
 from phiscene.sim.settings import SimSettings
-from phiscene.transforms import decompose, rotation_angle
 
 if TYPE_CHECKING:
     from phiscene.proxies import Proxy
@@ -205,73 +204,6 @@ def contact_validity(scene: "Scene", params: PhysicalParams, prune: bool = True)
             "pairs_evaluated": evaluated, "objects": per}
 
 
-# -- post-simulation drift ------------------------------------------------------------------------------------------
-def drift_bullet(scene: "Scene", proxies: dict[str, "Proxy"], params: PhysicalParams, sim: SimSettings,
-                 cache_dir: str | Path) -> dict:
-    """Post-simulation drift of a scene in pybullet.
-
-    Parameters
-    ----------
-    scene
-        The scene to release.
-    proxies
-        Convex proxies by object id.
-    params
-        ``upward_offset`` and ``frames``.
-    sim
-        Simulation settings (``density`` for the mass properties).
-    cache_dir
-        Folder for pybullet's hull files.
-
-    Returns
-    -------
-    ``{"drift_trans": mean m, "drift_rot": mean degrees, "ground_below": m,
-    "objects": {id: {"drift_trans": m, "drift_rot": degrees}}}``
-
-    Raises
-    ------
-    InputError
-        An object has no proxy.
-    """
-    from phiscene.inertia import rigid_props
-    from phiscene.proxies import check_proxies
-    from phiscene.scene import ground_below
-    from phiscene.sim.bullet import BulletWorld
-
-    check_proxies(scene, proxies)
-    offset = np.array([0.0, 0.0, float(params.upward_offset)])
-    floor = ground_below(scene)
-    with BulletWorld(sim, cache_dir) as world:
-        world.add_ground(floor)
-        for o in scene.objects:
-            hulls = proxies[o.id].hulls
-            _, _, scale = decompose(o.pose)
-            lifted = np.array(o.pose, dtype=float)
-            if o.attached is None:
-                lifted[:3, 3] += offset
-            world.add_body(o.id, hulls, lifted, rigid_props(o.mesh(), hulls, sim.density, scale))
-            if o.attached is not None:
-                world.set_static(o.id)
-        com0 = {o.id: world.com_position(o.id) - offset for o in scene.objects if o.attached is None}
-        world.step_frames(int(params.frames))
-        per = {}
-        for o in scene.objects:
-            if o.attached is not None:
-                per[o.id] = {"drift_trans": 0.0, "drift_rot": 0.0, "attached": o.attached}
-                continue
-            R0, _, _ = decompose(o.pose)
-            R1, _, _ = decompose(world.pose(o.id))
-            per[o.id] = {"drift_trans": float(np.linalg.norm(world.com_position(o.id) - com0[o.id])),
-                         "drift_rot": math.degrees(rotation_angle(R0, R1))}
-    return {**free_means(per, ("drift_trans", "drift_rot")), "ground_below": floor, "objects": per}
-
-
-def free_means(per: dict[str, dict], keys: tuple[str, ...]) -> dict[str, float]:
-    """Means of ``keys`` over the per-object entries that are not ``attached`` (0 when every object is)."""
-    free = [v for v in per.values() if "attached" not in v]
-    return {k: float(np.mean([v[k] for v in free])) if free else 0.0 for k in keys}
-
-
 # -- entry point -----------------------------------------------------------------------------------------------------
 def physical_metrics(scene: "Scene", proxies: dict[str, "Proxy"], params: PhysicalParams, sim: SimSettings,
                      cache_dir: str | Path) -> dict:
@@ -287,6 +219,8 @@ def physical_metrics(scene: "Scene", proxies: dict[str, "Proxy"], params: Physic
     """
     if not scene.objects:
         raise InputError(scene.source, "objects", "scene has no objects")
+    from phiscene.metrics.drift import drift_bullet
+
     static = contact_validity(scene, params)
     drift = drift_bullet(scene, proxies, params, sim, cache_dir)
     objects = {oid: {**static["objects"][oid], **drift["objects"][oid]} for oid in scene.ids}

@@ -1,4 +1,9 @@
-"""pybullet worlds: one DIRECT client per world, its id passed on every call.
+"""pybullet, in one place: clients, engine settings, and worlds of convex-proxy bodies.
+
+Every pybullet client of phiscene (settling, drift, ground truth, rendering, the demo, the exported-scene
+checks) is opened here: :func:`bullet_client` gives a headless client as pybullet_utils' ``BulletClient``
+(every call bound to its client, no ``physicsClientId`` keywords), disconnected on exit, and
+:func:`configure_engine` applies the deterministic engine settings.
 
 Bodies are built from convex proxies (a compound of convex hulls written to an
 OBJ file whose name is the hash of the hull vertices: pybullet caches collision
@@ -11,6 +16,8 @@ from __future__ import annotations
 
 import hashlib
 import logging
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -91,6 +98,47 @@ def hulls_obj_file(hulls: list[np.ndarray], cache_dir: str | Path) -> Path:
     return path
 
 
+def open_client():
+    """A new headless pybullet client (``pybullet_utils.bullet_client.BulletClient`` in DIRECT mode).
+
+    The caller disconnects it (``client.disconnect()``); :func:`bullet_client` does that for a ``with`` block.
+    """
+    import pybullet as p
+    from pybullet_utils.bullet_client import BulletClient
+
+    return BulletClient(connection_mode=p.DIRECT)
+
+
+@contextmanager
+def bullet_client() -> Iterator:
+    """A headless pybullet client for a ``with`` block, disconnected on exit (also on error)."""
+    client = open_client()
+    try:
+        yield client
+    finally:
+        client.disconnect()
+
+
+def configure_engine(client, time_step: float, solver_iterations: int, gravity) -> None:
+    """Reset a client's world and apply phiscene's engine settings.
+
+    Parameters
+    ----------
+    client
+        A client of :func:`open_client`.
+    time_step
+        Seconds per ``stepSimulation`` call (no internal sub-stepping).
+    solver_iterations
+        Constraint solver iterations per step.
+    gravity : (3,) float
+        Gravity vector (m/s^2).
+    """
+    client.resetSimulation()
+    client.setPhysicsEngineParameter(fixedTimeStep=time_step, numSolverIterations=solver_iterations,
+                                     deterministicOverlappingPairs=1, numSubSteps=0)
+    client.setGravity(*[float(g) for g in gravity])
+
+
 @dataclass
 class _Body:
     uid: int
@@ -115,46 +163,32 @@ class BulletWorld:
     def __init__(self, settings: SimSettings, cache_dir: str | Path):
         self.settings = settings
         self.cache_dir = Path(cache_dir)
-        self.client: int | None = None
+        self.p = None  # the BulletClient while the world is open
         self.bodies: dict[str, _Body] = {}
 
     def __enter__(self) -> "BulletWorld":
-        import pybullet as p
-
-        self.client = p.connect(p.DIRECT)
-        s = self.settings
-        p.resetSimulation(physicsClientId=self.client)
-        p.setPhysicsEngineParameter(
-            fixedTimeStep=s.frame_dt / s.substeps, numSolverIterations=s.solver_iterations,
-            deterministicOverlappingPairs=1, numSubSteps=0, physicsClientId=self.client)
-        p.setGravity(0, 0, -GRAVITY, physicsClientId=self.client)
+        self.p = open_client()
+        configure_engine(self.p, self.settings.frame_dt / self.settings.substeps, self.settings.solver_iterations,
+                         (0.0, 0.0, -GRAVITY))
         return self
 
     def __exit__(self, *exc) -> None:
-        import pybullet as p
-
-        if self.client is not None:
-            p.disconnect(physicsClientId=self.client)
-            self.client = None
+        if self.p is not None:
+            self.p.disconnect()
+            self.p = None
 
     # -- building -----------------------------------------------------------------
     def _surface(self, uid: int) -> None:
-        import pybullet as p
-
         s = self.settings
-        p.changeDynamics(uid, -1, lateralFriction=s.friction, rollingFriction=s.rolling_friction,
+        self.p.changeDynamics(uid, -1, lateralFriction=s.friction, rollingFriction=s.rolling_friction,
                          spinningFriction=s.spinning_friction, restitution=s.restitution,
-                         linearDamping=s.linear_damping, angularDamping=s.angular_damping,
-                         physicsClientId=self.client)
+                         linearDamping=s.linear_damping, angularDamping=s.angular_damping)
 
     def add_ground(self, height: float) -> int:
         """A static box whose top face is the plane ``z = height``; returns its body id."""
-        import pybullet as p
-
-        shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=[GROUND_HALF_EXTENT, GROUND_HALF_EXTENT,
-                                                                GROUND_HALF_THICKNESS], physicsClientId=self.client)
-        uid = p.createMultiBody(0.0, shape, basePosition=[0, 0, height - GROUND_HALF_THICKNESS],
-                                physicsClientId=self.client)
+        shape = self.p.createCollisionShape(self.p.GEOM_BOX, halfExtents=[GROUND_HALF_EXTENT, GROUND_HALF_EXTENT,
+                                                                GROUND_HALF_THICKNESS])
+        uid = self.p.createMultiBody(0.0, shape, basePosition=[0, 0, height - GROUND_HALF_THICKNESS])
         self._surface(uid)
         self.bodies["ground"] = _Body(uid, 1.0, np.eye(4), False)
         return uid
@@ -173,27 +207,22 @@ class BulletWorld:
         props
             Mass properties at this pose's scale; ``None`` makes the body static.
         """
-        import pybullet as p
-
         if name in self.bodies:
             raise ValueError(f"body {name!r} already in the world")
         _, _, scale = decompose(pose)
         obj = hulls_obj_file(hulls, self.cache_dir)
-        shape = p.createCollisionShape(p.GEOM_MESH, fileName=str(obj), meshScale=[scale] * 3,
-                                       physicsClientId=self.client)
+        shape = self.p.createCollisionShape(self.p.GEOM_MESH, fileName=str(obj), meshScale=[scale] * 3)
         if shape < 0:
             raise RuntimeError(f"pybullet could not build a collision shape for {name!r} from {obj}")
         if props is None:
             inertial = np.eye(4)
-            uid = p.createMultiBody(0.0, shape, physicsClientId=self.client)
+            uid = self.p.createMultiBody(0.0, shape)
         else:
             inertial = make_pose(props.principal_axes, props.com)
-            uid = p.createMultiBody(props.mass, shape, baseInertialFramePosition=props.com.tolist(),
-                                    baseInertialFrameOrientation=matrix_to_quat_xyzw(props.principal_axes).tolist(),
-                                    physicsClientId=self.client)
-            p.changeDynamics(uid, -1, localInertiaDiagonal=props.principal_moments.tolist(),
-                             physicsClientId=self.client)
-        p.changeDynamics(uid, -1, collisionMargin=self.settings.collision_margin, physicsClientId=self.client)
+            uid = self.p.createMultiBody(props.mass, shape, baseInertialFramePosition=props.com.tolist(),
+                                    baseInertialFrameOrientation=matrix_to_quat_xyzw(props.principal_axes).tolist())
+            self.p.changeDynamics(uid, -1, localInertiaDiagonal=props.principal_moments.tolist())
+        self.p.changeDynamics(uid, -1, collisionMargin=self.settings.collision_margin)
         self._surface(uid)
         self.bodies[name] = _Body(uid, scale, inertial, props is not None)
         self.set_pose(name, pose)
@@ -202,55 +231,43 @@ class BulletWorld:
     # -- poses ----------------------------------------------------------------------
     def set_pose(self, name: str, pose: np.ndarray) -> None:
         """Place body ``name`` at phiscene pose ``pose`` (its scale must match the body's) and zero its velocity."""
-        import pybullet as p
-
         b = self.bodies[name]
         R, t, _ = decompose(pose)
         com_frame = make_pose(R, t) @ b.inertial
-        p.resetBasePositionAndOrientation(b.uid, com_frame[:3, 3].tolist(),
-                                          matrix_to_quat_xyzw(com_frame[:3, :3]).tolist(), physicsClientId=self.client)
-        p.resetBaseVelocity(b.uid, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+        self.p.resetBasePositionAndOrientation(b.uid, com_frame[:3, 3].tolist(),
+                                          matrix_to_quat_xyzw(com_frame[:3, :3]).tolist())
+        self.p.resetBaseVelocity(b.uid, [0, 0, 0], [0, 0, 0])
 
     def pose(self, name: str) -> np.ndarray:
         """Current phiscene pose (4, 4) of body ``name``, scale included."""
-        import pybullet as p
-
         b = self.bodies[name]
-        pos, quat = p.getBasePositionAndOrientation(b.uid, physicsClientId=self.client)
+        pos, quat = self.p.getBasePositionAndOrientation(b.uid)
         com_frame = make_pose(quat_xyzw_to_matrix(quat), pos)
         link = com_frame @ np.linalg.inv(b.inertial)
         return make_pose(link[:3, :3], link[:3, 3], b.scale)
 
     def com_position(self, name: str) -> np.ndarray:
         """World position (3,) of the centre of mass of body ``name``."""
-        import pybullet as p
-
-        pos, _ = p.getBasePositionAndOrientation(self.bodies[name].uid, physicsClientId=self.client)
+        pos, _ = self.p.getBasePositionAndOrientation(self.bodies[name].uid)
         return np.asarray(pos, dtype=float)
 
     def velocity(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """Linear (3,) and angular (3,) velocity of body ``name``."""
-        import pybullet as p
-
-        lin, ang = p.getBaseVelocity(self.bodies[name].uid, physicsClientId=self.client)
+        lin, ang = self.p.getBaseVelocity(self.bodies[name].uid)
         return np.asarray(lin), np.asarray(ang)
 
     def set_static(self, name: str) -> None:
         """Freeze body ``name`` in place (mass 0)."""
-        import pybullet as p
-
         b = self.bodies[name]
-        p.changeDynamics(b.uid, -1, mass=0.0, physicsClientId=self.client)
-        p.resetBaseVelocity(b.uid, [0, 0, 0], [0, 0, 0], physicsClientId=self.client)
+        self.p.changeDynamics(b.uid, -1, mass=0.0)
+        self.p.resetBaseVelocity(b.uid, [0, 0, 0], [0, 0, 0])
         b.dynamic = False
 
     # -- stepping -----------------------------------------------------------------
     def step_frames(self, frames: int = 1) -> None:
         """Advance ``frames`` frames of ``settings.frame_dt`` (each ``settings.substeps`` steps)."""
-        import pybullet as p
-
         for _ in range(frames * self.settings.substeps):
-            p.stepSimulation(physicsClientId=self.client)
+            self.p.stepSimulation()
 
     def contacts(self, name_a: str, name_b: str | None = None) -> list[dict]:
         """Contact points of body ``name_a`` (with ``name_b`` only, if given).
@@ -260,15 +277,13 @@ class BulletWorld:
         A list of dicts with ``other`` (name), ``position`` (3,) on B, ``normal`` (3,) from B to A,
         ``distance`` (negative = penetration) and ``force`` (normal force, N).
         """
-        import pybullet as p
-
         names = {b.uid: n for n, b in self.bodies.items()}
         a = self.bodies[name_a].uid
         kw = {"bodyA": a}
         if name_b is not None:
             kw["bodyB"] = self.bodies[name_b].uid
         out = []
-        for c in p.getContactPoints(physicsClientId=self.client, **kw):
+        for c in self.p.getContactPoints(**kw):
             out.append({"other": names.get(c[2], str(c[2])), "position": np.asarray(c[6]),
                         "normal": np.asarray(c[7]), "distance": float(c[8]), "force": float(c[9])})
         return out
@@ -284,11 +299,9 @@ class BulletWorld:
         -------
         ``{(name_a, name_b): (3,) float}``, each touching pair once; the force on B from A is the negative.
         """
-        import pybullet as p
-
         names = {b.uid: n for n, b in self.bodies.items()}
         out: dict[tuple[str, str], np.ndarray] = {}
-        for c in p.getContactPoints(physicsClientId=self.client):
+        for c in self.p.getContactPoints():
             f = np.asarray(c[7]) * c[9] + c[10] * np.asarray(c[11]) + c[12] * np.asarray(c[13])
             key = (names.get(c[1], str(c[1])), names.get(c[2], str(c[2])))
             out[key] = out.get(key, 0.0) + f
@@ -297,9 +310,7 @@ class BulletWorld:
     # -- faithful grounding helpers ------------------------------------------------
     def set_dynamics(self, name: str, **kwargs) -> None:
         """Change pybullet dynamics of body ``name`` (``linearDamping``, ``rollingFriction``, ...)."""
-        import pybullet as p
-
-        p.changeDynamics(self.bodies[name].uid, -1, physicsClientId=self.client, **kwargs)
+        self.p.changeDynamics(self.bodies[name].uid, -1, **kwargs)
 
     def restore_dynamics(self, name: str) -> None:
         """Reset the friction and damping of body ``name`` to the world's settings."""
@@ -310,14 +321,12 @@ class BulletWorld:
 
         Bodies farther than ``max_distance`` (or not in the world) are left out.
         """
-        import pybullet as p
-
         out: dict[str, float] = {}
         a = self.bodies[name].uid
         for o in others:
             if o not in self.bodies:
                 continue
-            pts = p.getClosestPoints(a, self.bodies[o].uid, max_distance, physicsClientId=self.client)
+            pts = self.p.getClosestPoints(a, self.bodies[o].uid, max_distance)
             if pts:
                 out[o] = float(min(c[8] for c in pts))
         return out

@@ -1,6 +1,7 @@
-"""MuJoCo worlds built with ``mujoco.MjSpec``: the cross-simulator drift check (paper Tab. 3).
+"""MuJoCo worlds built with ``mujoco.MjSpec`` for the cross-simulator drift check (paper Tab. 3).
 
-The drift protocol is the one of the pybullet drift (paper supplement,
+This module builds, compiles and steps the worlds; the drift metric itself is
+:func:`phiscene.metrics.drift.drift_mujoco`. The drift protocol is the one of the pybullet drift (paper supplement,
 "Post-simulation stability"): every object is a free body, all dynamic
 together; a ground plane is placed right below the scene (its top at the
 lowest world z of all object meshes); every object is lifted by a small
@@ -60,7 +61,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -68,10 +69,9 @@ from phiscene.atomic import write_text
 from phiscene.errors import InputError
 from phiscene.inertia import RigidProps, rigid_props
 from phiscene.params import Params
-from phiscene.scene import ground_below
 from phiscene.sim.settings import SimSettings
 from phiscene.tolerances import GRAVITY
-from phiscene.transforms import decompose, make_pose, matrix_to_quat_wxyz, rotation_angle
+from phiscene.transforms import decompose, make_pose, matrix_to_quat_wxyz
 
 if TYPE_CHECKING:  # heavy import only for type checkers
     import mujoco
@@ -81,21 +81,6 @@ if TYPE_CHECKING:  # heavy import only for type checkers
 
 #: Name of the ground geom (object ids may not use it).
 GROUND_NAME = "ground"
-
-
-class DriftParams(Protocol):
-    """What the drift needs from the physical-metric parameters (e.g. ``PhysicalParams``).
-
-    Attributes
-    ----------
-    upward_offset
-        Lift (m) applied to every object before release.
-    frames
-        Number of frames of ``SimSettings.frame_dt`` simulated.
-    """
-
-    upward_offset: float
-    frames: int
 
 
 @dataclass(frozen=True)
@@ -379,65 +364,6 @@ def body_poses(model: "mujoco.MjModel", data: "mujoco.MjData", names: list[str])
         b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
         out[name] = make_pose(data.xmat[b].reshape(3, 3).copy(), data.xpos[b].copy())
     return out
-
-
-# -- the drift metric -------------------------------------------------------------------
-def drift_mujoco(scene: "Scene", proxies: dict[str, "Proxy"], params: DriftParams, sim: SimSettings,
-                 mj: MujocoParams | None = None) -> dict:
-    """Post-simulation drift of a scene in MuJoCo (same protocol as the pybullet drift).
-
-    Parameters
-    ----------
-    scene
-        The scene to release.
-    proxies
-        Convex proxies by object id.
-    params
-        Any object with ``upward_offset`` (m) and ``frames``.
-    sim
-        Shared simulation settings.
-    mj
-        MuJoCo contact and solver settings.
-
-    Returns
-    -------
-    ``{"drift_trans": mean m, "drift_rot": mean degrees, "ground_below": m,
-    "objects": {id: {"drift_trans": m, "drift_rot": degrees}}}`` (the structure
-    of the pybullet drift); translation drift is measured from the centre of
-    mass before the lift, ``ground_below`` is the ground height used.
-    """
-    import mujoco
-
-    offset = float(params.upward_offset)
-    frames = int(params.frames)
-    if not (math.isfinite(offset) and offset >= 0.0):
-        raise ValueError(f"upward_offset must be finite and >= 0, got {params.upward_offset}")
-    if frames < 0:
-        raise ValueError(f"frames must be >= 0, got {params.frames}")
-    lift = make_pose(translation=[0.0, 0.0, offset])
-    lifted = scene.with_poses({o.id: lift @ o.pose for o in scene.objects if o.attached is None})
-    floor = ground_below(scene)
-    spec = build_spec(lifted, proxies, sim, floor, mj)
-    model = compile_model(spec, sim)
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    start = body_poses(model, data, scene.ids)
-    step_frames(model, data, frames, sim)
-    end = body_poses(model, data, scene.ids)
-    from phiscene.metrics.physical import free_means
-
-    objects = {}
-    for o in scene.objects:
-        name = o.id
-        if o.attached is not None:
-            objects[name] = {"drift_trans": 0.0, "drift_rot": 0.0, "attached": o.attached}
-            continue
-        com0 = start[name][:3, 3] - [0.0, 0.0, offset]
-        objects[name] = {
-            "drift_trans": float(np.linalg.norm(end[name][:3, 3] - com0)),
-            "drift_rot": math.degrees(rotation_angle(start[name][:3, :3], end[name][:3, :3])),
-        }
-    return {**free_means(objects, ("drift_trans", "drift_rot")), "ground_below": floor, "objects": objects}
 
 
 def write_mjcf(spec: "mujoco.MjSpec", path: str | Path) -> Path:
