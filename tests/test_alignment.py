@@ -13,7 +13,10 @@ import pytest
 import trimesh
 
 from phiscene.atomic import write_json
-from phiscene.bench.render import (
+from phiscene.errors import InputError
+from phiscene.meshes import save_mesh
+from phiscene.metrics.alignment import AlignmentParams, alignment_metrics, mask_iou
+from phiscene.render import (
     RenderParams,
     camera_for,
     labels_to_colors,
@@ -22,9 +25,6 @@ from phiscene.bench.render import (
     save_png,
     segmentation_colors,
 )
-from phiscene.errors import InputError
-from phiscene.meshes import save_mesh
-from phiscene.metrics.alignment import AlignmentParams, alignment_metrics, mask_iou
 from phiscene.scene import Scene, SceneObject, save_scene
 from phiscene.transforms import make_pose, rotation_z
 

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import torch
 import trimesh
+from scenes import box_meshes, box_scene, clearance, convex_proxies
 
 from phiscene.assembly import (
     AssemblyParams,
@@ -28,9 +29,9 @@ from phiscene.assembly import (
 from phiscene.assembly.penetration import AdamState
 from phiscene.errors import InputError
 from phiscene.inertia import rigid_props
-from phiscene.meshes import mesh_hash, sample_surface, save_mesh
+from phiscene.meshes import mesh_hash
 from phiscene.proxies import ProxyParams, scene_proxies
-from phiscene.scene import Scene, SceneObject
+from phiscene.scene import Scene
 from phiscene.sdf import signed_distance
 from phiscene.sdf_grid import GridParams, clear_memory_cache, grid_box, near_surface_points, sdf_grid
 from phiscene.sim.bullet import BulletWorld
@@ -47,17 +48,16 @@ def work(tmp_path_factory):
     """A folder with box meshes (name -> path) and a shared cache."""
     root = tmp_path_factory.mktemp("assembly")
     sizes = {"big": (0.4, 0.4, 0.2), "cube": (0.1, 0.1, 0.1), "plank": (0.4, 0.1, 0.02), "slab": (0.6, 0.6, 0.1)}
-    meshes = {n: save_mesh(trimesh.creation.box(s), root / f"{n}.obj") for n, s in sizes.items()}
-    return {"root": root, "cache": root / "cache", "meshes": meshes, "sizes": sizes}
+    return {"root": root, "cache": root / "cache", "meshes": box_meshes(root, sizes), "sizes": sizes}
 
 
 def make_scene(work, placements: dict[str, tuple[str, np.ndarray]]) -> Scene:
     """A scene of box meshes: id -> (mesh name, pose)."""
-    return Scene([SceneObject(oid, work["meshes"][name], pose) for oid, (name, pose) in placements.items()])
+    return box_scene(work["meshes"], placements)
 
 
 def ground(work, scene: Scene, order=None, **params):
-    proxies = scene_proxies(scene, ProxyParams(backend="convex"), work["cache"])
+    proxies = convex_proxies(scene, work["cache"])
     return ground_scene(scene, scene.ids if order is None else order, proxies, AssemblyParams.from_dict(params),
                         SIM, work["cache"])
 
@@ -68,13 +68,6 @@ def bottom(scene: Scene, oid: str) -> float:
 
 def top(scene: Scene, oid: str) -> float:
     return float(scene.get(oid).world_mesh().bounds[1, 2])
-
-
-def clearance(a: trimesh.Trimesh, b: trimesh.Trimesh, n: int = 20000) -> float:
-    """Exact bidirectional clearance between two world meshes (min signed distance of dense samples)."""
-    pa = np.vstack([sample_surface(a, n, 1), a.vertices])
-    pb = np.vstack([sample_surface(b, n, 2), b.vertices])
-    return float(min(signed_distance(b, pa).min(), signed_distance(a, pb).min()))
 
 
 # -- SDF grid --------------------------------------------------------------------------------------------------------

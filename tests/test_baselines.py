@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import torch
 import trimesh
+from scenes import box_meshes, box_scene, clearance, convex_proxies
 
 from phiscene.assembly.penetration import sdf_body
 from phiscene.baselines import (
@@ -32,10 +33,8 @@ from phiscene.baselines import (
 )
 from phiscene.baselines.joint_sdf import JointLoss
 from phiscene.errors import InputError
-from phiscene.meshes import load_mesh, sample_surface, save_mesh
-from phiscene.proxies import ProxyParams, scene_proxies
-from phiscene.scene import Scene, SceneObject, save_scene
-from phiscene.sdf import signed_distance
+from phiscene.meshes import load_mesh, save_mesh
+from phiscene.scene import Scene, save_scene
 from phiscene.sim.settings import SimSettings
 from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph
 from phiscene.transforms import make_pose, random_rotation, rotation_z
@@ -50,28 +49,19 @@ def work(tmp_path_factory):
     """A folder with box meshes (name -> path) and a shared cache."""
     root = tmp_path_factory.mktemp("baselines")
     sizes = {"big": (0.4, 0.4, 0.2), "cube": (0.1, 0.1, 0.1)}
-    meshes = {n: save_mesh(trimesh.creation.box(s), root / f"{n}.obj") for n, s in sizes.items()}
-    return {"root": root, "cache": root / "cache", "meshes": meshes}
+    return {"root": root, "cache": root / "cache", "meshes": box_meshes(root, sizes)}
 
 
 def make_scene(work, placements: dict[str, tuple[str, np.ndarray]]) -> Scene:
-    return Scene([SceneObject(oid, work["meshes"][name], pose, description=f"{name} {oid}",
-                              color=(10 * i, 20, 30)) for i, (oid, (name, pose)) in enumerate(placements.items())])
+    return box_scene(work["meshes"], placements, describe=True)
 
 
 def proxies(work, scene: Scene) -> dict:
-    return scene_proxies(scene, ProxyParams(backend="convex"), work["cache"])
+    return convex_proxies(scene, work["cache"])
 
 
 def bounds(scene: Scene, oid: str) -> np.ndarray:
     return np.asarray(scene.get(oid).world_mesh().bounds)
-
-
-def clearance(a: trimesh.Trimesh, b: trimesh.Trimesh, n: int = 20000) -> float:
-    """Exact bidirectional clearance between two world meshes (min signed distance of dense samples)."""
-    pa = np.vstack([sample_surface(a, n, 1), a.vertices])
-    pb = np.vstack([sample_surface(b, n, 2), b.vertices])
-    return float(min(signed_distance(b, pa).min(), signed_distance(a, pb).min()))
 
 
 # -- joint SDF -------------------------------------------------------------------------------------------------------

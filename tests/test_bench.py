@@ -20,10 +20,10 @@ from phiscene.bench.build import BenchParams, build_scene, default_params, scene
 from phiscene.bench.cleanmesh import MAX_FACES, canonical, is_clean, remesh_union
 from phiscene.bench.degrade import DegradeParams, degrade_scene
 from phiscene.bench.groundtruth import GTParams, ground_truth, release
-from phiscene.bench.render import colors_to_labels, load_png, project, read_camera, render_instance_mask
 from phiscene.bench.templates import TEMPLATES, template_names
 from phiscene.meshes import save_mesh
 from phiscene.proxies import ProxyParams, proxy_for_mesh
+from phiscene.render import colors_to_labels, load_png, project, read_camera, render_instance_mask
 from phiscene.scene import Scene, SceneObject, load_scene
 from phiscene.schemas import read_json, validate
 from phiscene.sim.settings import SimSettings

@@ -18,10 +18,10 @@ from simcheck import resimulate
 from phiscene.bench.build import build_scene, with_suite_defaults
 from phiscene.bench.cleanmesh import is_clean
 from phiscene.bench.furniture import DESIGNS, FURNITURE_CYCLE, TOP_CATEGORIES, design_meta, furniture_asset
-from phiscene.bench.render import project, read_camera
 from phiscene.bench.rooms import ROOMS_DEFAULTS, Footprint, separation
 from phiscene.bench.templates import TEMPLATES, TemplateParams, template_names
 from phiscene.proxies import ProxyParams
+from phiscene.render import project, read_camera
 from phiscene.scene import Scene, load_scene
 from phiscene.schemas import read_json
 from phiscene.sim.settings import SimSettings

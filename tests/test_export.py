@@ -211,8 +211,8 @@ def test_bad_inputs_name_file_and_field(bridge, tmp_path):
 def test_demo_throws_a_visible_ball_that_moves_the_target(bridge, tmp_path):
     from PIL import Image
 
-    from phiscene.bench.render import RenderParams, project
     from phiscene.demo import BALL_RGB, DemoParams, save_gif, throw_ball
+    from phiscene.render import RenderParams, project
 
     params = DemoParams(seconds=1.0, fps=10.0, width=160, height=120, ball_radius=0.045, speed=3.0)
     result = throw_ball(bridge["out"] / "scene_urdf.json", params, RenderParams(shadow=False))

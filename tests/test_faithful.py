@@ -13,14 +13,13 @@ import numpy as np
 import pytest
 import torch
 import trimesh
+from scenes import box_scene, convex_proxies
 from scipy.spatial.transform import Rotation
 
 from phiscene.assembly import AssemblyParams, ground_scene
 from phiscene.assembly.faithful import flush_pose, resting_normals
 from phiscene.meshes import save_mesh
 from phiscene.metrics.pose import pose_metrics
-from phiscene.proxies import ProxyParams, scene_proxies
-from phiscene.scene import Scene, SceneObject
 from phiscene.sim.settings import SimSettings
 from phiscene.topology.graph import SupportEdge, SupportGraph
 from phiscene.transforms import decompose, make_pose
@@ -43,7 +42,7 @@ def work(tmp_path_factory):
 
 
 def scene_of(work, placements):
-    return Scene([SceneObject(oid, work["meshes"][name], pose) for oid, (name, pose) in placements.items()])
+    return box_scene(work["meshes"], placements)
 
 
 def graph_of(scene, edges):
@@ -52,7 +51,7 @@ def graph_of(scene, edges):
 
 
 def run(work, scene, graph, params=FAITHFUL):
-    proxies = scene_proxies(scene, ProxyParams(backend="convex"), work["cache"])
+    proxies = convex_proxies(scene, work["cache"])
     return ground_scene(scene, graph.order, proxies, AssemblyParams.from_dict(params), SIM, work["cache"],
                         graph=graph)
 

@@ -11,10 +11,10 @@ import trimesh
 from PIL import Image
 
 from phiscene.baselines.external import import_external
-from phiscene.bench.render import segmentation_colors
 from phiscene.errors import InputError
 from phiscene.io.front3d import Front3dParams, import_front3d_room, scene_ids
 from phiscene.metrics.reconstruction import reconstruction_metrics
+from phiscene.render import segmentation_colors
 from phiscene.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -165,7 +165,7 @@ def test_reference_image_masks_and_camera(tmp_path):
     for o in scene.objects:  # objects are read in name order: crate, post, slab
         rows = {"crate": 0, "slab": 1, "post": 2}[o.id]
         assert tuple(seg[rows * 5 + 2, 5]) == o.color
-    from phiscene.bench.render import project, read_camera
+    from phiscene.render import project, read_camera
 
     cam = read_camera(tmp_path / "out/reference/camera.json")
     # the pinhole projection of a world point equals the intrinsics applied to its camera coordinates

@@ -6,13 +6,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import trimesh
+from scenes import scene_file
 from scipy.spatial.transform import Rotation
 
 from phiscene.errors import InputError
-from phiscene.meshes import save_mesh
 from phiscene.metrics.drift import drift_mujoco
-from phiscene.proxies import ProxyParams, proxy_for_mesh
-from phiscene.scene import Scene, SceneObject, load_scene, save_scene
 from phiscene.sim import mujoco as pm
 from phiscene.sim.settings import SimSettings
 from phiscene.tolerances import GRAVITY
@@ -24,14 +22,7 @@ PROTOCOL = SimpleNamespace(upward_offset=0.002, frames=120)
 SIM = SimSettings()
 
 
-def make_scene(tmp_path, objects, ground_height=0.0):
-    """Scene file + convex proxies from ``[(id, trimesh, pose)]``."""
-    objs = [SceneObject(name, save_mesh(mesh, tmp_path / "meshes" / f"{name}.obj"), pose)
-            for name, mesh, pose in objects]
-    scene = load_scene(save_scene(Scene(objs, ground_height=ground_height), tmp_path / "scene.json"))
-    proxies = {o.id: proxy_for_mesh(o.mesh_path, ProxyParams(backend="convex"), tmp_path / "cache")
-               for o in scene.objects}
-    return scene, proxies
+make_scene = scene_file  # scene file + convex proxies from [(id, trimesh, pose)]
 
 
 def resting(mesh, R, xy=(0.0, 0.0), z0=0.0, scale=1.0):

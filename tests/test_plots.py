@@ -15,11 +15,11 @@ from PIL import Image
 
 from phiscene import plots
 from phiscene.atomic import write_json
-from phiscene.bench.render import RenderParams, camera_for, project, scene_bounds, segmentation_colors
 from phiscene.errors import InputError
 from phiscene.failures import record_for, write_failure
 from phiscene.meshes import save_mesh
 from phiscene.metrics.evaluate import FORMAT as METRICS_FORMAT
+from phiscene.render import RenderParams, camera_for, project, scene_bounds, segmentation_colors
 from phiscene.scene import Scene, SceneObject
 from phiscene.topology.graph import SupportEdge, SupportGraph, save
 from phiscene.transforms import make_pose

@@ -9,7 +9,7 @@ arc that reaches the target (by default the centre of mass of the object
 whose top is highest) at a given horizontal speed, the world runs
 ``seconds``, and every ``1 / fps`` seconds a frame is rendered on the CPU by
 pybullet's TinyRenderer from the same kind of oblique camera as the
-benchmark's reference image (:mod:`phiscene.bench.render`: its camera
+benchmark's reference image (:mod:`phiscene.render`: its camera
 conventions, ``fit_distance`` and ``look_at_camera``), framing the scene and
 the launch point. Frames are written as a looping GIF with Pillow.
 """
@@ -106,7 +106,7 @@ class DemoResult:
     objects : dict of str to (n, 3) float
         Centre of mass of each object at each frame.
     camera : dict
-        The camera (``phiscene.camera/1`` dict, see :mod:`phiscene.bench.render`).
+        The camera (``phiscene.camera/1`` dict, see :mod:`phiscene.render`).
     ball_radius : float
     launch_velocity : (3,) float
     target : str
@@ -151,7 +151,7 @@ def throw_ball(index_path: str | Path, params: DemoParams, render=None) -> DemoR
     params
         Ball, launch and timing settings.
     render
-        :class:`phiscene.bench.render.RenderParams` (image size, camera angles, light); defaults if ``None``.
+        :class:`phiscene.render.RenderParams` (image size, camera angles, light); defaults if ``None``.
 
     Returns
     -------
@@ -164,8 +164,8 @@ def throw_ball(index_path: str | Path, params: DemoParams, render=None) -> DemoR
     """
     from dataclasses import replace
 
-    from phiscene.bench.render import RenderParams, fit_distance, look_at_camera
     from phiscene.io.export import load_urdf_scene, read_urdf_index
+    from phiscene.render import RenderParams, fit_distance, look_at_camera
 
     render = replace(render or RenderParams(), width=int(params.width), height=int(params.height))
     index = read_urdf_index(index_path)
@@ -281,7 +281,7 @@ def run_demo(index_path: str | Path, out_gif: str | Path, out_json: str | Path |
     params
         :class:`DemoParams` mapping.
     render
-        :class:`phiscene.bench.render.RenderParams` mapping (image size, camera angles).
+        :class:`phiscene.render.RenderParams` mapping (image size, camera angles).
 
     Returns
     -------
@@ -290,7 +290,7 @@ def run_demo(index_path: str | Path, out_gif: str | Path, out_json: str | Path |
     import logging
 
     from phiscene.atomic import write_json
-    from phiscene.bench.render import RenderParams
+    from phiscene.render import RenderParams
 
     dp = DemoParams.from_dict(params)
     result = throw_ball(index_path, dp, RenderParams.from_dict(render))

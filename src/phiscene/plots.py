@@ -383,7 +383,7 @@ def orbit_camera(camera: dict, azimuth_deg: float, bounds: np.ndarray | None = N
     Parameters
     ----------
     camera
-        A camera dict (``camera.json``, see :mod:`phiscene.bench.render`) with ``eye`` and ``target``.
+        A camera dict (``camera.json``, see :mod:`phiscene.render`) with ``eye`` and ``target``.
     azimuth_deg
         Rotation (deg, counter-clockwise seen from above).
     bounds : (2, 3) float, optional
@@ -394,7 +394,7 @@ def orbit_camera(camera: dict, azimuth_deg: float, bounds: np.ndarray | None = N
     -------
     camera dict of the same image size, field of view and clipping planes.
     """
-    from phiscene.bench.render import RenderParams, fit_distance, look_at_camera
+    from phiscene.render import RenderParams, fit_distance, look_at_camera
     from phiscene.transforms import rotation_z
 
     eye, target = np.asarray(camera["eye"], dtype=float), np.asarray(camera["target"], dtype=float)
@@ -416,7 +416,7 @@ def before_after(initial_scene: Scene, method_scene: Scene, camera_json: str | P
 
     Row 1 is the reference camera, row 2 the reference camera swung by ``oblique_deg`` about the
     vertical axis through its target (backed off so both scenes fit). Objects are drawn in their
-    ``meta["rgb"]`` colour (else the segmentation colour) by :func:`phiscene.bench.render.render`;
+    ``meta["rgb"]`` colour (else the segmentation colour) by :func:`phiscene.render.render`;
     images are placed pixel for pixel (no resampling).
 
     Parameters
@@ -436,7 +436,7 @@ def before_after(initial_scene: Scene, method_scene: Scene, camera_json: str | P
     -------
     The written path. Size: ``2 W + 3 * 6`` x ``2 (H + 22) + 3 * 6`` px for a W x H camera.
     """
-    from phiscene.bench.render import read_camera, render, scene_bounds
+    from phiscene.render import read_camera, render, scene_bounds
 
     cam = read_camera(camera_json)
     bounds = np.concatenate([scene_bounds(initial_scene), scene_bounds(method_scene)])

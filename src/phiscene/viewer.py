@@ -15,7 +15,7 @@ Conventions: glTF and three.js are y-up, phiscene is z-up, so the exported
 scene is rotated by :data:`phiscene.transforms.Z_UP_TO_Y_UP` (x, y, z) -> (x, z, -y); the page's
 trackball then orbits about the scene's vertical. The page opens at the
 scene's reference camera (``scene.camera``) when it has one, else at the
-benchmark's default oblique camera (:func:`phiscene.bench.render.camera_for`).
+benchmark's default oblique camera (:func:`phiscene.render.camera_for`).
 Objects are coloured by their segmentation ``color`` (``color_by="color"``,
 the default) or by their natural colour ``meta["rgb"]`` (``color_by="rgb"``,
 what the reference image shows), grey when unset; the
@@ -71,7 +71,7 @@ def ground_slab(scene: Scene):
     """
     import trimesh
 
-    from phiscene.bench.render import scene_bounds
+    from phiscene.render import scene_bounds
 
     b = scene_bounds(scene)
     centre = b.mean(axis=0)
@@ -82,7 +82,7 @@ def ground_slab(scene: Scene):
 
 
 def _view_camera(scene: Scene) -> dict:
-    from phiscene.bench.render import RenderParams, camera_for, read_camera
+    from phiscene.render import RenderParams, camera_for, read_camera
 
     if scene.camera is not None and Path(scene.camera).is_file():
         return read_camera(scene.camera)

@@ -5,4 +5,5 @@ from phiscene.runner import job
 
 sm = snakemake  # noqa: F821 (injected by Snakemake)
 with job(f"demo {sm.wildcards.suite}/{sm.wildcards.scene}", sm.log[0], sm.threads, failure_outputs=sm.output):
-    run_demo(sm.input.urdf, sm.output.gif, sm.output.summary, dict(sm.params.demo), dict(sm.params.render))
+    run_demo(index_path=sm.input.urdf, out_gif=sm.output.gif, out_json=sm.output.summary, params=dict(sm.params.demo),
+             render=dict(sm.params.render))

@@ -7,4 +7,4 @@ from phiscene.runner import job
 
 sm = snakemake  # noqa: F821 (injected by Snakemake)
 with job(f"front3d {sm.wildcards.suite}/{sm.wildcards.scene}", sm.log[0], sm.threads):
-    run_front3d_scene(dict(sm.params.source), sm.wildcards.scene, Path(sm.output.gt).parent.parent)
+    run_front3d_scene(source=dict(sm.params.source), scene=sm.wildcards.scene, out_dir=Path(sm.output.gt).parent.parent)

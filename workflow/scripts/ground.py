@@ -6,5 +6,6 @@ from phiscene.runner import job
 sm = snakemake  # noqa: F821 (injected by Snakemake)
 with job(f"{sm.wildcards.method} {sm.wildcards.suite}/{sm.wildcards.scene}", sm.log[0], sm.threads,
          failure_outputs=sm.output):
-    run_ground(sm.input.scene, sm.input.topology, sm.input.proxies, sm.output.scene, sm.output.log_json,
-               dict(sm.params.assembly), dict(sm.params.sim), sm.params.cache_dir)
+    run_ground(scene_path=sm.input.scene, topology_path=sm.input.topology, proxies_path=sm.input.proxies,
+               out_scene=sm.output.scene, out_log=sm.output.log_json, assembly=dict(sm.params.assembly),
+               sim=dict(sm.params.sim), cache_dir=sm.params.cache_dir)

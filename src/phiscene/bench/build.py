@@ -13,7 +13,7 @@ Output layout::
     out_dir/initial/scene.json          degraded scene
     out_dir/reference/image.png         RGB render of the GT scene
     out_dir/reference/segmentation.png  instance colours (= objects' "color"), black background
-    out_dir/reference/camera.json       camera (see phiscene.bench.render)
+    out_dir/reference/camera.json       camera (see phiscene.render)
 """
 
 from __future__ import annotations
@@ -35,7 +35,6 @@ from phiscene.bench import rooms  # noqa: F401  (registers the rooms suite: temp
 from phiscene.bench.assets import ASSET_VERSION, asset_library
 from phiscene.bench.degrade import DegradeParams, degrade_scene
 from phiscene.bench.groundtruth import GroundTruth, GTParams, ground_truth
-from phiscene.bench.render import RenderParams, camera_for, labels_to_colors, render, save_png, segmentation_colors
 from phiscene.bench.templates import (
     GROUND,
     LIBRARIES,
@@ -49,6 +48,7 @@ from phiscene.bench.templates import (
 from phiscene.meshes import save_mesh
 from phiscene.params import Params
 from phiscene.proxies import ProxyParams
+from phiscene.render import RenderParams, camera_for, labels_to_colors, render, save_png, segmentation_colors
 from phiscene.scene import Scene, SceneObject, save_scene
 from phiscene.sim.settings import SimSettings
 

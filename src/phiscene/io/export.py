@@ -276,7 +276,7 @@ def urdf_text(name: str, visual: str, hulls: list[str], props: RigidProps, rgb, 
 
 def ground_urdf_text(sim: SimSettings) -> str:
     """URDF of the static ground: a massless slab whose top face is the link's ``z = 0`` plane."""
-    from phiscene.bench.render import GROUND_RGB
+    from phiscene.render import GROUND_RGB
     from phiscene.sim.bullet import GROUND_HALF_EXTENT, GROUND_HALF_THICKNESS
 
     robot = ET.Element("robot", name="ground")
@@ -447,7 +447,7 @@ def mjcf_spec(scene: "Scene", proxies: dict[str, "Proxy"], sim: SimSettings,
     """
     import mujoco
 
-    from phiscene.bench.render import GROUND_RGB
+    from phiscene.render import GROUND_RGB
     from phiscene.sim.mujoco import GROUND_NAME, build_spec
 
     _check_ids(scene)

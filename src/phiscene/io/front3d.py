@@ -284,8 +284,8 @@ def import_front3d_room(params: Front3dParams, scene: str, out_dir: str | Path) 
     InputError
         Unknown scene id, missing files, an id map without kept objects, or an initial scene lacking kept objects.
     """
-    from phiscene.bench.render import save_png, segmentation_colors
     from phiscene.meshes import save_mesh
+    from phiscene.render import save_png, segmentation_colors
 
     out_dir = Path(out_dir)
     rooms = {scene_id(r): (i, r) for i, r in select_rooms(params)}

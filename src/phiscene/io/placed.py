@@ -272,8 +272,8 @@ def import_placed(objects: list[PlacedObject], out_dir: str | Path, params: Plac
     -------
     The written scene, loaded back (validated).
     """
-    from phiscene.bench.render import look_at_camera
     from phiscene.meshes import save_mesh
+    from phiscene.render import look_at_camera
 
     out_dir = Path(out_dir)
     if transform is None:

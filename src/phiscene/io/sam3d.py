@@ -424,7 +424,7 @@ def read_floor(path: Path) -> Floor:
 # -- reference image, segmentation, camera ---------------------------------------------------------------------------
 def compose_segmentation(objects: list[Sam3dObject], colors: list[tuple[int, int, int]]) -> np.ndarray:
     """Instance segmentation (H, W, 3) uint8 from per-object binary masks (later objects drawn over earlier)."""
-    from phiscene.bench.render import load_png
+    from phiscene.render import load_png
 
     seg = None
     for o, c in zip(objects, colors):
@@ -442,7 +442,7 @@ def compose_segmentation(objects: list[Sam3dObject], colors: list[tuple[int, int
 
 def camera_json(intrinsics: dict, world_to_p3d: np.ndarray, near: float = 0.02, far: float = 50.0,
                 where: Path | None = None) -> dict:
-    """A ``phiscene.camera/1`` dict (see :mod:`phiscene.bench.render`) from pinhole intrinsics and a pose.
+    """A ``phiscene.camera/1`` dict (see :mod:`phiscene.render`) from pinhole intrinsics and a pose.
 
     Parameters
     ----------
@@ -467,7 +467,7 @@ def camera_json(intrinsics: dict, world_to_p3d: np.ndarray, near: float = 0.02, 
     left, right = -(cx + 0.5) / fx * near, (W - 0.5 - cx) / fx * near
     top, bottom = (cy + 0.5) / fy * near, -(H - 0.5 - cy) / fy * near
     proj = p.computeProjectionMatrix(left, right, bottom, top, near, far)
-    from phiscene.bench.render import CAMERA_FORMAT
+    from phiscene.render import CAMERA_FORMAT
 
     c2w = np.linalg.inv(w2c)
     return {
@@ -511,8 +511,8 @@ def import_sam3d(in_dir: str | Path, out_dir: str | Path, floor: Floor | None = 
     InputError
         Naming the file and field of the first problem in the input.
     """
-    from phiscene.bench.render import load_png, save_png, segmentation_colors
     from phiscene.meshes import save_mesh
+    from phiscene.render import load_png, save_png, segmentation_colors
     from phiscene.schemas import read_json
 
     in_dir, out_dir = Path(in_dir), Path(out_dir)

@@ -3,7 +3,7 @@
 The paper scores alignment with the reference image by CLIP image similarity.
 No CLIP weights are reachable here, so phiscene uses a stricter and more
 interpretable stand-in (docs/DESIGN.md §5): the scene is rendered from the reference
-camera with the benchmark renderer (:func:`phiscene.bench.render.render_instance_mask`)
+camera with the benchmark renderer (:func:`phiscene.render.render_instance_mask`)
 and each object's *visible* mask is compared with its mask in the reference
 instance segmentation.
 
@@ -180,7 +180,7 @@ def reference_masks(reference_dir: Path, colors: dict[str, tuple[int, int, int]]
     """
     H, W = int(camera["height"]), int(camera["width"])
     if params.reference == "gt_render":
-        from phiscene.bench.render import render_instance_mask
+        from phiscene.render import render_instance_mask
         from phiscene.scene import load_scene
 
         gt_path = Path(reference_dir).parent / "gt" / "scene.json"
@@ -191,7 +191,7 @@ def reference_masks(reference_dir: Path, colors: dict[str, tuple[int, int, int]]
         index = {oid: k for k, oid in enumerate(gt.ids)}
         return {oid: labels == index.get(oid, -2) for oid in colors}, 0
 
-    from phiscene.bench.render import load_png
+    from phiscene.render import load_png
 
     seg_path = Path(reference_dir) / "segmentation.png"
     if not seg_path.is_file():
@@ -212,7 +212,7 @@ def reference_masks(reference_dir: Path, colors: dict[str, tuple[int, int, int]]
 
 def rendered_masks(scene: Scene, camera: dict) -> dict[str, np.ndarray]:
     """Visible mask (H, W) bool of every object of ``scene`` rendered from ``camera``, by id."""
-    from phiscene.bench.render import render_instance_mask
+    from phiscene.render import render_instance_mask
 
     labels = render_instance_mask(scene, camera)
     return {o.id: labels == k for k, o in enumerate(scene.objects)}
@@ -267,7 +267,7 @@ def alignment_metrics(scene: Scene, initial: Scene, reference_dir: Path, params:
     InputError
         Missing or malformed camera or segmentation, id or colour mismatches between the scenes.
     """
-    from phiscene.bench.render import read_camera
+    from phiscene.render import read_camera
 
     reference_dir = Path(reference_dir)
     _check_ids(scene, initial)

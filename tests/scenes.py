@@ -1,0 +1,55 @@
+"""Shared builders of the small test scenes: box meshes, scenes placing them, convex proxies, exact clearance.
+
+Test modules import these instead of keeping their own copies (``from scenes import box_meshes, box_scene``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from phiscene.meshes import sample_surface, save_mesh
+from phiscene.proxies import ProxyParams, proxy_for_mesh, scene_proxies
+from phiscene.scene import Scene, SceneObject, load_scene, save_scene
+
+
+def box_meshes(root: Path, sizes: dict[str, tuple[float, float, float]]) -> dict[str, Path]:
+    """One box mesh file per name (``root/<name>.obj``, centred at the origin), name -> path."""
+    return {name: save_mesh(trimesh.creation.box(size), Path(root) / f"{name}.obj") for name, size in sizes.items()}
+
+
+def box_scene(meshes: dict[str, Path], placements: dict[str, tuple[str, np.ndarray]], describe: bool = False,
+              ground_height: float = 0.0) -> Scene:
+    """A scene of mesh files: object id -> (mesh name, (4, 4) pose); ``describe`` adds descriptions and colours."""
+    objects = []
+    for i, (oid, (name, pose)) in enumerate(placements.items()):
+        extra = {"description": f"{name} {oid}", "color": (10 * i, 20, 30)} if describe else {}
+        objects.append(SceneObject(oid, meshes[name], pose, **extra))
+    return Scene(objects, ground_height=ground_height)
+
+
+def convex_proxies(scene: Scene, cache: Path) -> dict:
+    """One convex hull per object (the ``convex`` proxy backend)."""
+    return scene_proxies(scene, ProxyParams(backend="convex"), cache)
+
+
+def scene_file(tmp_path: Path, objects: list[tuple[str, trimesh.Trimesh, np.ndarray]],
+               ground_height: float = 0.0) -> tuple[Scene, dict]:
+    """A saved and reloaded scene of ``[(id, mesh, pose)]`` and its convex proxies."""
+    objs = [SceneObject(name, save_mesh(mesh, tmp_path / "meshes" / f"{name}.obj"), pose)
+            for name, mesh, pose in objects]
+    scene = load_scene(save_scene(Scene(objs, ground_height=ground_height), tmp_path / "scene.json"))
+    proxies = {o.id: proxy_for_mesh(o.mesh_path, ProxyParams(backend="convex"), tmp_path / "cache")
+               for o in scene.objects}
+    return scene, proxies
+
+
+def clearance(a: trimesh.Trimesh, b: trimesh.Trimesh, n: int = 20000) -> float:
+    """Exact bidirectional clearance between two world meshes (min signed distance of dense samples)."""
+    from phiscene.sdf import signed_distance
+
+    pa = np.vstack([sample_surface(a, n, 1), a.vertices])
+    pb = np.vstack([sample_surface(b, n, 2), b.vertices])
+    return float(min(signed_distance(b, pa).min(), signed_distance(a, pb).min()))
