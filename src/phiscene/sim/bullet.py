@@ -99,14 +99,24 @@ def hulls_obj_file(hulls: list[np.ndarray], cache_dir: str | Path) -> Path:
 
 
 def open_client():
-    """A new headless pybullet client (``pybullet_utils.bullet_client.BulletClient`` in DIRECT mode).
+    """A new headless pybullet client: a ``pybullet_utils.bullet_client.BulletClient`` in DIRECT mode.
 
-    The caller disconnects it (``client.disconnect()``); :func:`bullet_client` does that for a ``with`` block.
+    Connected without BulletClient's ``options`` argument, which makes pybullet print ``argv[0]=`` on stdout
+    (stdout carries the ``phiscene`` command's JSON). The caller disconnects it (``client.disconnect()``);
+    :func:`bullet_client` does that for a ``with`` block.
     """
+    import os
+
     import pybullet as p
     from pybullet_utils.bullet_client import BulletClient
 
-    return BulletClient(connection_mode=p.DIRECT)
+    class _DirectClient(BulletClient):
+        def __init__(self):  # what BulletClient.__init__ does for DIRECT, minus the options argument
+            self._shapes = {}
+            self._pid = os.getpid()
+            self._client = p.connect(p.DIRECT)
+
+    return _DirectClient()
 
 
 @contextmanager
