@@ -134,11 +134,32 @@ def method_scene(method, suite, scene):
     return f"results/methods/{method}/{suite}/{scene}/scene.json"
 
 
+def reconstructed_suite(suite):
+    """Whether a benchmark suite's initial meshes are reconstructions, not the ground truth's (`degrade.kind:
+    foundation`): its ground-truth row then needs proxies of its own meshes."""
+    if "source" in config["suites"][suite]:
+        return False
+    from phiscene.bench.build import with_suite_defaults
+
+    merged = with_suite_defaults(suite, phiscene.config.bench_settings(config, suite))
+    return (merged.get("degrade") or {}).get("kind", "clean") == "foundation"
+
+
 def method_proxies(method, suite, scene):
-    """Proxies for the simulated metrics of a method's scene: its own if its scenes bring their own meshes."""
-    if config["methods"][method]["kind"] in OWN_MESH_KINDS:
+    """Proxies for the simulated metrics of a method's scene: the scene's shared ones (of its initial meshes),
+    its own if its scenes bring their own meshes, the ground truth's on a suite whose initial meshes are
+    reconstructions."""
+    spec = config["methods"][method]
+    if spec["kind"] in OWN_MESH_KINDS:
         return f"results/methods/{method}/{suite}/{scene}/proxies.npz"
+    if spec["kind"] == "reference" and spec["source"] == "gt" and reconstructed_suite(suite):
+        return f"results/proxies/{suite}/{scene}.gt.npz"
     return f"results/proxies/{suite}/{scene}.npz"
+
+
+def own_proxies(method, suite):
+    """Whether a method's metrics on a suite use proxies other than the scene's shared ones."""
+    return method_proxies(method, suite, "x") != f"results/proxies/{suite}/x.npz"
 
 
 def proxies_of(wildcards):
@@ -208,7 +229,7 @@ def metric_tasks(suite, methods):
         {
             "method": m,
             "sections": metric_sections(m, suite),
-            "own_proxies": config["methods"][m]["kind"] in OWN_MESH_KINDS,
+            "own_proxies": own_proxies(m, suite),
             "align": config["methods"][m].get("frame", "shared") == "own",
         }
         for m in methods

@@ -22,3 +22,27 @@ rule proxies:
         ENV
     script:
         "../scripts/proxies.py"
+
+
+rule gt_proxies:
+    # ground-truth meshes of suites whose initial meshes are reconstructions (benchmark degrade kind foundation)
+    input:
+        scene="results/scenes/{suite}/{scene}/gt/scene.json",
+    output:
+        "results/proxies/{suite}/{scene}.gt.npz",
+    params:
+        proxies=suite_proxies,
+        cache_dir=CACHE,
+        version=V.PROXIES,
+    log:
+        "results/logs/proxies/{suite}/{scene}.gt.log",
+    benchmark:
+        "results/benchmarks/proxies/{suite}/{scene}.gt.tsv"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=30,
+    conda:
+        ENV
+    script:
+        "../scripts/proxies.py"

@@ -34,6 +34,7 @@ from phiscene.atomic import write_json
 from phiscene.bench import rooms  # noqa: F401  (registers the rooms suite: templates, library, defaults)
 from phiscene.bench.assets import ASSET_VERSION, asset_library
 from phiscene.bench.degrade import DegradeParams, degrade_scene
+from phiscene.bench.foundation import foundation_scene
 from phiscene.bench.groundtruth import GroundTruth, GTParams, ground_truth
 from phiscene.bench.templates import (
     GROUND,
@@ -110,6 +111,8 @@ def default_params() -> dict:
     out["n_objects"] = list(p.n_objects)
     out["templates"] = list(p.templates)
     out["render"]["light_direction"] = list(p.render.light_direction)
+    for key in ("axis_scale", "scale"):
+        out["degrade"]["foundation"][key] = list(getattr(p.degrade.foundation, key))
     return out
 
 
@@ -255,7 +258,13 @@ def _write_outputs(root: Path, gt: GroundTruth, camera: dict, images: tuple, p: 
     gt_scene.camera = camera_path
     gt_scene.meta = {**meta, "state": "gt", "settle_frames": gt.settle_frames,
                      "max_drift_m": max(gt.drift_m.values()), "max_drift_deg": max(gt.drift_deg.values())}
-    initial = degrade_scene(gt_scene, p.degrade, [sseed, 2])
+    if p.degrade.kind == "foundation":  # reconstructed meshes, camera-ray errors, levelled from a tilted frame
+        made = foundation_scene(gt_scene, camera, labels, p.degrade.foundation, [sseed, 2], root / "initial" / "meshes")
+        initial = made.initial
+        made.camera_frame.meta = {**meta, **made.camera_frame.meta}
+        save_scene(made.camera_frame, root / "initial" / "camera_frame.json")
+    else:
+        initial = degrade_scene(gt_scene, p.degrade, [sseed, 2])
     initial.meta = {**meta, **initial.meta}
     for o in initial.objects:  # the initial scene must not reveal the template's support intent
         o.meta = {k: v for k, v in o.meta.items() if k not in ("role", "intended_supporters")}

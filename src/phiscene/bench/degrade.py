@@ -11,18 +11,26 @@ Each object's pose gets independent errors, all drawn from one seed:
 
 Normal draws are truncated at ``truncate`` standard deviations, so every error
 is bounded. Meshes are untouched: the initial scene points to the GT meshes.
+
+This is the ``clean`` model (``kind: clean``, the default). ``kind: foundation`` selects the realistic model
+of :mod:`phiscene.bench.foundation` (reconstructed meshes, camera-ray depth errors with heavy tails, a tilted
+camera frame levelled by estimate), with its magnitudes in ``foundation``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from phiscene.bench.foundation import FoundationParams
 from phiscene.params import Params
 from phiscene.scene import Scene
 from phiscene.transforms import decompose, make_pose
+
+#: Degradation models of the initial scene.
+DEGRADE_KINDS = ("clean", "foundation")
 
 
 @dataclass(frozen=True)
@@ -44,6 +52,11 @@ class DegradeParams(Params):
         Standard deviation of the relative uniform scale error. Default 0.03 (3 %).
     truncate
         Normal draws are clipped at this many standard deviations. Default 3.
+    kind
+        ``clean`` (this module: pose errors of a few centimetres on the GT meshes) or ``foundation``
+        (:mod:`phiscene.bench.foundation`); the ``clean`` magnitudes above apply to ``clean`` only.
+    foundation
+        Magnitudes of the ``foundation`` model.
     """
 
     _label = "degradation parameters"
@@ -55,6 +68,8 @@ class DegradeParams(Params):
     rotation_sigma_deg: float = 4.0
     scale_sigma: float = 0.03
     truncate: float = 3.0
+    kind: str = "clean"
+    foundation: FoundationParams = field(default_factory=FoundationParams)
 
     def check(self) -> None:
         """Reject an empty vertical offset range, negative sigmas and scales that could reach 0 (``ValueError``)."""
@@ -64,6 +79,8 @@ class DegradeParams(Params):
             raise ValueError("degradation sigmas must be >= 0")
         if self.truncate * self.scale_sigma >= 1:
             raise ValueError("truncate * scale_sigma must be < 1 (scales must stay positive)")
+        if self.kind not in DEGRADE_KINDS:
+            raise ValueError(f"degradation kind must be one of {list(DEGRADE_KINDS)}, got {self.kind!r}")
 
 
 def _normal(rng: np.random.Generator, sigma: float, truncate: float, size=None):
@@ -127,7 +144,8 @@ def degrade_scene(scene: Scene, params: DegradeParams, seed) -> Scene:
     poses, errors = {}, {}
     for o in scene.objects:
         poses[o.id], errors[o.id] = degrade_pose(o.pose, rng, params)
-    out = scene.with_poses(poses, meta={"state": "initial", "degrade": params.to_dict()})
+    clean = {k: v for k, v in params.to_dict().items() if k not in ("kind", "foundation")}
+    out = scene.with_poses(poses, meta={"state": "initial", "degrade": clean})
     for o in out.objects:
         o.meta = {**o.meta, "degrade": errors[o.id]}
     return out
