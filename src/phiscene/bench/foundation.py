@@ -6,7 +6,7 @@ reference camera and its instance segmentation, every draw from the scene seed:
 
 1. **Shapes are reconstructions.** Each object's mesh is rebuilt (:func:`reconstruct_mesh`): subdivided to
    tens of thousands of faces (``faces``); the side the reference camera sees is kept, the hidden side is
-   flattened towards the object's centre along the view ray (``hidden_flatten``) and bumped with low-frequency
+   flattened along the view ray towards the farthest visible point (``hidden_flatten``) and bumped with low-frequency
    noise (``hidden_noise``); some hidden faces are dropped, so the mesh is not watertight
    (``hole_fraction``); and its lengths are off per object axis (``axis_scale``: a book too thick, a spoon too
    short).
@@ -63,7 +63,7 @@ class FoundationParams(Params):
     faces
         Reconstructed meshes are subdivided to at least this many faces (real ones: about 30,000).
     hidden_flatten
-        Share of the hidden side's depth behind the object's centre (along the view ray) removed.
+        Share of the hidden side's depth beyond the farthest visible point (along the view ray) removed.
     hidden_noise
         Standard deviation of the hidden side's low-frequency bumps, relative to the object's bounding-box
         diagonal.
@@ -96,7 +96,7 @@ class FoundationParams(Params):
 
     faces: int = 20000
     hidden_flatten: float = 0.6
-    hidden_noise: float = 0.02
+    hidden_noise: float = 0.005
     hole_fraction: float = 0.01
     axis_scale: tuple[float, float] = (0.9, 1.08)
     scale: tuple[float, float] = (0.88, 1.06)
@@ -203,10 +203,13 @@ def reconstruct_mesh(world: trimesh.Trimesh, eye: np.ndarray, visible: np.ndarra
     ray = centre - np.asarray(eye, dtype=float)
     ray /= np.linalg.norm(ray)
     diag = float(np.linalg.norm(world.extents))
-    depth = (v - centre) @ ray  # > 0: behind the centre, seen from the camera
+    depth = (v - centre) @ ray  # along the view ray, from the centre
     hidden = ~vis
-    behind = hidden & (depth > 0)
-    v[behind] -= params.hidden_flatten * depth[behind, None] * ray  # flattened back
+    # the back is flattened towards the farthest visible point: hidden vertices beyond it are pulled back by a
+    # share of their excess depth (a convex shape stays convex: the region beyond a plane is compressed onto it)
+    far = float(depth[vis].max()) if vis.any() else 0.0
+    behind = hidden & (depth > far)
+    v[behind] -= params.hidden_flatten * (depth[behind, None] - far) * ray
     if params.hidden_noise > 0 and hidden.any():  # low-frequency bumps: a few random cosine waves
         k = rng.normal(size=(3, 3)) * (2 * math.pi / max(diag, 1e-9))
         phase = rng.uniform(0, 2 * math.pi, size=3)
