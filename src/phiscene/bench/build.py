@@ -9,7 +9,7 @@ Output layout::
 
     out_dir/meshes/obj_XX.glb           local-frame meshes (shared by gt and initial)
     out_dir/gt/scene.json               ground truth at rest
-    out_dir/gt/topology.json            GT support graph (backend "gt")
+    out_dir/gt/topology.json            GT support graph (backend "gt"; walls as ``structure`` nodes)
     out_dir/initial/scene.json          degraded scene
     out_dir/reference/image.png         RGB render of the GT scene
     out_dir/reference/segmentation.png  instance colours (= objects' "color"), black background
@@ -268,6 +268,8 @@ def _write_outputs(root: Path, gt: GroundTruth, camera: dict, images: tuple, p: 
     save_png(labels_to_colors(labels, colors), root / "reference" / "segmentation.png")
     topology = {"format": "phiscene.topology/1", "backend": "gt", "objects": ["ground", *gt_scene.ids],
                 "edges": gt.edges, "order": [], "dropped_edges": []}
+    if gt_scene.structure:  # walls as supporter nodes (phiscene.topology.graph)
+        topology["structure"] = [p.id for p in gt_scene.structure]
     topo_path = root / "gt" / "topology.json"
     schemas.validate(topology, "topology", topo_path)
     write_json(topo_path, topology)

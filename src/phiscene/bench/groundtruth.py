@@ -142,6 +142,12 @@ def scene_world(scene: Scene, settings: SimSettings, proxies: dict[str, Proxy],
         yield world, masses
 
 
+def _poses(scene: Scene, world: BulletWorld) -> dict[str, np.ndarray]:
+    """Every object's pose (4, 4) in ``world``; attached objects keep their scene pose exactly (no round trip)."""
+    return {o.id: np.array(o.pose, dtype=float) if o.attached is not None else world.pose(o.id)
+            for o in scene.objects}
+
+
 def _still(world: BulletWorld, ids: list[str], params: GTParams) -> bool:
     for name in ids:
         lin, ang = world.velocity(name)
@@ -169,7 +175,7 @@ def settle(scene: Scene, settings: SimSettings, proxies: dict[str, Proxy], cache
             world.step_frames(1)
             frame += 1
             still = still + 1 if _still(world, scene.ids, params) else 0
-        return {i: world.pose(i) for i in scene.ids}, frame
+        return _poses(scene, world), frame
 
 
 @dataclass
@@ -220,7 +226,7 @@ def release(scene: Scene, settings: SimSettings, proxies: dict[str, Proxy], cach
         for (a, b), f in list(normal.items()):  # contacts with ground and walls are only listed from the object's side
             if b not in objects:
                 normal[(b, a)] = -f
-        end = {o.id: world.pose(o.id) for o in scene.objects}
+        end = _poses(scene, world)
     drift_m, drift_deg = {}, {}
     for o in scene.objects:
         R0, t0, _ = decompose(o.pose)
