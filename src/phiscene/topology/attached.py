@@ -78,7 +78,7 @@ class AttachedParams(Params):
 
     def check(self) -> None:
         """Non-negative distances, a ratio in (0, 1), at least 4 samples (``ValueError``)."""
-        if min(self.support_gap, self.min_height, self.ceiling_gap, self.room_height) < 0:
+        if min(self.support_gap, self.min_height, self.ceiling_gap, self.room_height, self.wall_distance) < 0:
             raise ValueError("attachment distances must be >= 0")
         if not 0 < self.thin_ratio < 1 or self.samples < 4:
             raise ValueError("attachment 'thin_ratio' must be in (0, 1) and 'samples' >= 4")

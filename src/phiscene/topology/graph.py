@@ -234,8 +234,8 @@ def check_graph(graph: SupportGraph, path: str | Path | None = None,
             if e.target not in known:
                 raise InputError(path, f"{where}.to", f"unknown node {e.target!r}")
             if e.target == GROUND or e.target in planes:
-                raise InputError(path, f"{where}.to", f"the {'ground' if e.target == GROUND else 'plane'} "
-                                 f"{e.target!r} cannot be supported")
+                raise InputError(path, f"{where}.to", "the ground cannot be supported" if e.target == GROUND
+                                 else f"the plane {e.target!r} cannot be supported")
             if e.source == e.target:
                 raise InputError(path, where, f"self loop on {e.source!r}")
             if e.pair in seen:
