@@ -15,15 +15,16 @@ at the far side of the reference camera) and a floor quadrant holding several co
 * ``poster`` / ``frame``: a thin panel fixed to a wall (``attached = wall id``, a static body);
 * ``wall_shelf``: a board fixed to a wall carrying one or two objects.
 
-A template lists core groups (placed first, while they fit in ``n_objects``) and extra groups drawn
-at random; the remaining objects are free-standing fillers. Floor groups are built around the
-origin (as the contact templates build them) and moved to a random free spot of the quadrant;
-wall groups are built against the plane ``x = 0`` and moved to a random spot along one of the walls.
-A spot is free when the group's world AABB, grown by ``params.clearance``, overlaps no other
-group's; the quadrant grows by 10 % after ``scatter_tries`` failed draws.
+A template lists core groups (taken first, while they fit in ``n_objects``) and extra groups drawn
+at random; the remaining objects are free-standing fillers. Wall groups are built against the plane
+``x = 0`` and moved to a random free spot along one of the walls; floor groups are built around the
+origin (as the contact templates build them) and moved, tallest first, to the free spot farthest
+from the reference camera among ``scatter_tries`` random draws, so that small objects end in front
+and stay visible. A spot is free when the group's world AABB, grown by ``params.clearance``,
+overlaps no other group's; the quadrant grows by 10 % after a round of draws without one.
 
-Suite defaults (:data:`CLUTTER_DEFAULTS`) set 5-20 objects, stacks of 3-5 and a larger render so
-small objects stay visible in a room-sized view.
+Suite defaults (:data:`CLUTTER_DEFAULTS`) set 5-20 objects, stacks of 3-5 and a larger render
+(640 x 480) so small objects stay visible in a room-sized view.
 """
 
 from __future__ import annotations
@@ -90,7 +91,7 @@ SHELF_ITEMS = ("book", "box", "can", "vase", "blob")
 CLUTTER_DEFAULTS: dict = {
     "n_objects": [5, 20],
     "template": {"region": 0.9, "clearance": 0.04, "stack_min": 3, "stack_max": 5},
-    "render": {"width": 480, "height": 360, "min_visible_pixels": 30},
+    "render": {"width": 640, "height": 480, "min_visible_pixels": 30},
 }
 
 
@@ -315,6 +316,8 @@ GROUPS = {
 
 
 # -- layout ---------------------------------------------------------------------------------------------------
+#: Horizontal direction (2,) from the scene towards the reference camera (``render.azimuth_deg`` -60 deg).
+TOWARDS_CAMERA = np.array([np.cos(np.radians(-60.0)), np.sin(np.radians(-60.0))])
 #: Rounds of ``scatter_tries`` draws (the floor grows by 10 % after each) before a group is given up.
 GROW_ROUNDS = 15
 
@@ -335,7 +338,11 @@ class Corner:
         return all((box[1] + c <= b[0]).any() or (b[1] + c <= box[0]).any() for b in self.boxes)
 
     def place(self, group: list[Placement], wall: str | None, rng: np.random.Generator) -> bool:
-        """Move ``group`` to a free spot (on the floor, or along ``wall``); ``False`` after :data:`GROW_ROUNDS` rounds."""
+        """Move ``group`` to a free spot; ``False`` after :data:`GROW_ROUNDS` rounds.
+
+        Along ``wall``: the first free one of random draws. On the floor: of ``scatter_tries`` random
+        draws, the free one farthest from the reference camera (:data:`TOWARDS_CAMERA`).
+        """
         if wall is not None:
             yaw, _ = WALL_FRAMES[wall]
             transform_group(group, yaw)
@@ -344,6 +351,7 @@ class Corner:
                 if p.attached == WALL:
                     p.attached = wall
         box0 = _group_box(group)
+        found: list[tuple[float, np.ndarray, np.ndarray]] = []
         for _ in range(GROW_ROUNDS):
             for _ in range(self.params.scatter_tries):
                 if wall is None:
@@ -361,9 +369,14 @@ class Corner:
                     shift = float(rng.uniform(lo, hi)) * axis
                 box = box0 + [[shift[0], shift[1], 0.0]]
                 if self.free(box):
-                    transform_group(group, 0.0, shift)
-                    self.boxes.append(box)
-                    return True
+                    found.append((float(box[:, :2].mean(axis=0) @ TOWARDS_CAMERA), shift, box))
+                    if wall is not None:
+                        break
+            if found:  # the free spot farthest from the camera: the room fills back to front
+                _, shift, box = min(found, key=lambda f: f[0])
+                transform_group(group, 0.0, shift)
+                self.boxes.append(box)
+                return True
             self.extent *= 1.1
         return False
 
@@ -381,17 +394,24 @@ def compose(library: tuple, n_objects: int, rng: np.random.Generator, params: Te
             core: tuple[str, ...], extras: tuple[str, ...]) -> Layout:
     """A room corner of exactly ``n_objects`` objects: core groups, extra groups, then fillers.
 
-    Core groups (names of :data:`GROUPS`) are added in order while they fit in ``n_objects``; then
+    Core groups (names of :data:`GROUPS`) are taken in order while they fit in ``n_objects``; then
     extra groups drawn at random (up to 3 tries of a group that does not fit, at most :data:`MAX_REPEATS`
-    groups of a kind); the rest are
-    free-standing fillers. A group whose builder fails (:class:`TemplateError`) is skipped.
+    groups of a kind); the rest are free-standing fillers. A group whose builder fails
+    (:class:`TemplateError`) is skipped. Groups are then placed back to front (:meth:`Corner.place`):
+    wall groups first, then floor groups from the tallest down, so that small objects end in front.
+
+    Raises
+    ------
+    TemplateError
+        A group found no free spot.
     """
     corner = Corner(params)
-    out = Layout(structure=WALLS)
-
+    groups: list[tuple[list[Placement], str | None]] = []
+    count = 0
     used: dict[str, int] = {}
 
-    def add(name: str) -> bool:
+    def take(name: str) -> bool:
+        nonlocal count
         if used.get(name, 0) >= MAX_REPEATS:
             return False
         used[name] = used.get(name, 0) + 1
@@ -400,29 +420,29 @@ def compose(library: tuple, n_objects: int, rng: np.random.Generator, params: Te
             group = build(library, rng, params)
         except TemplateError:
             return False
-        if len(out) + len(group) > n_objects:
+        if count + len(group) > n_objects:
             return False
-        wall = WALLS[int(rng.integers(len(WALLS)))].id if on_wall else None
-        if not corner.place(group, wall, rng):
-            return False
-        base = len(out)
-        for p in group:
-            p.supporters = tuple(s + base if isinstance(s, int) and s != GROUND else s for s in p.supporters)
-        out.extend(group)
+        groups.append((group, WALLS[int(rng.integers(len(WALLS)))].id if on_wall else None))
+        count += len(group)
         return True
 
     for name in core:
-        add(name)
+        take(name)
     misses = 0
-    while extras and misses < 3 and len(out) < n_objects:
-        misses = 0 if add(extras[int(rng.integers(len(extras)))]) else misses + 1
+    while extras and misses < 3 and count < n_objects:
+        misses = 0 if take(extras[int(rng.integers(len(extras)))]) else misses + 1
     fillers = by_category(library, *FILLER_CATEGORIES)
-    while len(out) < n_objects:
+    for _ in range(n_objects - count):
         asset = _choose(rng, fillers, "filler")
-        group = [Placement(asset, pose_resting_on(asset, rotation_z(_yaw(rng)), (0.0, 0.0), 0.0, _gap(rng, params)),
-                           "filler")]
-        if not corner.place(group, None, rng):
+        pose = pose_resting_on(asset, rotation_z(_yaw(rng)), (0.0, 0.0), 0.0, _gap(rng, params))
+        groups.append(([Placement(asset, pose, "filler")], None))
+    out = Layout(structure=WALLS)
+    for group, wall in sorted(groups, key=lambda gw: (gw[1] is None, -_group_box(gw[0])[1, 2])):
+        if not corner.place(group, wall, rng):
             raise TemplateError(f"no room for {n_objects} objects in the corner")
+        base = len(out)
+        for p in group:
+            p.supporters = tuple(s + base if isinstance(s, int) and s != GROUND else s for s in p.supporters)
         out.extend(group)
     return out
 
