@@ -22,7 +22,7 @@ from phiscene.scene import Plane, Scene, SceneObject
 from phiscene.sim.bullet import BulletWorld
 from phiscene.sim.mujoco import drift_mujoco
 from phiscene.sim.settings import SimSettings
-from phiscene.topology.graph import SupportGraph
+from phiscene.topology.graph import SupportEdge, SupportGraph
 from phiscene.transforms import make_pose
 
 SIM = SimSettings()
@@ -180,3 +180,31 @@ def test_small_clutter_scenes_build_with_verified_ground_truth(library, cache, t
         initial = json.loads((out / "initial" / "scene.json").read_text())
         assert initial["structure"] == gt["structure"]
     assert relations == {"attached", "leans_on"}
+
+
+def test_topology_files_with_walls_score_against_each_other(tmp_path):
+    from phiscene.metrics.topology import file_scores
+    from phiscene.topology.graph import save
+
+    gt = SupportGraph(["ground", "a", "b"], [], structure=["wall_0"])
+    gt = gt.with_edges([SupportEdge("ground", "a"), SupportEdge("ground", "b"), SupportEdge("wall_0", "b", "leans_on"),
+                        SupportEdge("wall_0", "a", "attached")])
+    pred = SupportGraph(["ground", "a", "b"], [SupportEdge("ground", "a"), SupportEdge("ground", "b")])
+    save(gt, tmp_path / "gt.json")
+    save(pred, tmp_path / "pred.json")
+    # 2 of the 4 GT edges found, nothing wrong predicted: P = 1, R = 0.5, F1 = 2/3
+    s = file_scores(tmp_path / "pred.json", tmp_path / "gt.json")
+    assert (s.tp, s.fp, s.fn) == (2, 0, 2) and s.f1 == pytest.approx(2 / 3)
+    assert file_scores(tmp_path / "gt.json", tmp_path / "gt.json").f1 == 1.0
+
+
+def test_given_topology_keeps_the_walls(plank_scene, tmp_path):
+    from phiscene import topology
+    from phiscene.topology.graph import save
+
+    gt = SupportGraph(["ground", "plank"], [SupportEdge("ground", "plank"), SupportEdge("wall_0", "plank", "leans_on")],
+                      structure=["wall_0"])
+    save(gt, tmp_path / "gt.json")
+    graph = topology.infer(plank_scene, "given", given_path=tmp_path / "gt.json")
+    assert graph.structure == ["wall_0"] and graph.order == ["plank"]
+    assert sorted(graph.parents("plank")) == ["ground", "wall_0"]

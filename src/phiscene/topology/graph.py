@@ -214,7 +214,6 @@ def check_graph(graph: SupportGraph, path: str | Path | None = None,
     planes = set(graph.structure)
     if len(planes) != len(graph.structure) or planes & known:
         raise InputError(path, "structure", f"duplicate or object-named plane ids {sorted(graph.structure)}")
-    known |= planes
     if scene_ids is not None:
         scene_set = set(scene_ids)
         if GROUND in scene_set:
@@ -225,6 +224,7 @@ def check_graph(graph: SupportGraph, path: str | Path | None = None,
             raise InputError(path, "objects", f"missing scene objects {missing}")
         if extra:
             raise InputError(path, "objects", f"objects not in the scene {extra}")
+    known |= planes
     for key, edges in (("edges", graph.edges), ("dropped_edges", graph.dropped_edges)):
         seen: set[tuple[str, str]] = set()
         for i, e in enumerate(edges):
