@@ -350,7 +350,8 @@ def support_graph_figure(topology_json: str | Path, out_png: str | Path, title: 
     with _rc():
         fig = _figure(width, height)
         ax = fig.add_axes((0.02, 0.02, 0.96, 0.86))
-        nx.draw_networkx_nodes(kept, pos, nodelist=[GROUND, *graph.structure], node_shape="s", node_color=[(0.6, 0.5, 0.4)],
+        fixed = [GROUND, *graph.structure]  # the ground and the walls: brown squares
+        nx.draw_networkx_nodes(kept, pos, nodelist=fixed, node_shape="s", node_color=[(0.6, 0.5, 0.4)] * len(fixed),
                                node_size=node_size * 1.6, ax=ax)
         nx.draw_networkx_nodes(kept, pos, nodelist=objects, node_color=fill, edgecolors="black", linewidths=0.8,
                                node_size=node_size, ax=ax)

@@ -40,10 +40,10 @@ from phiscene.bench.cleanmesh import canonical
 from phiscene.bench.furniture import furniture_asset
 from phiscene.bench.rooms import add_top
 from phiscene.bench.templates import (
+    FILLER_CATEGORIES,
     GROUND,
     LIBRARIES,
     SUITE_DEFAULTS,
-    FILLER_CATEGORIES,
     Layout,
     Placement,
     TemplateError,
@@ -186,7 +186,7 @@ def wall_lean_group(library, rng, params) -> list[Placement]:
 
 
 def _boards(asset: Asset) -> list[tuple[float, float]]:
-    """Shelf boards of a ``shelf`` asset: ``(z of the top face, z of the bottom face)`` in its canonical frame, low first."""
+    """Boards of a ``shelf`` asset: ``(z of the top face, z of the bottom face)`` in its canonical frame, low first."""
     parts = asset.recipe["parts"]
     lo = np.min([np.asarray(c) - np.asarray(s) / 2 for _, s, c in parts], axis=0)
     hi = np.max([np.asarray(c) + np.asarray(s) / 2 for _, s, c in parts], axis=0)
@@ -245,7 +245,7 @@ def table_group(library, rng, params) -> list[Placement]:
     table = _choose(rng, by_category(library, "dining_table"), "dining table")
     t_pose = pose_resting_on(table, np.eye(3), (0.0, 0.0), 0.0, _gap(rng, params))
     group = [Placement(table, t_pose, "table")]
-    W, D = float(table.extents[0]), float(table.extents[1])
+    D = float(table.extents[1])
     parts = table.recipe["parts"]
     leg_x = abs(float(parts[1][2][0])) - float(parts[1][1][0]) / 2  # inner face of the legs
     for side in (1.0, -1.0)[: int(rng.integers(1, 3))]:
