@@ -208,3 +208,13 @@ def test_given_topology_keeps_the_walls(plank_scene, tmp_path):
     graph = topology.infer(plank_scene, "given", given_path=tmp_path / "gt.json")
     assert graph.structure == ["wall_0"] and graph.order == ["plank"]
     assert sorted(graph.parents("plank")) == ["ground", "wall_0"]
+
+
+def test_geometric_backend_finds_the_wall_a_plank_leans_on(plank_scene):
+    from phiscene import topology
+
+    graph = topology.infer(plank_scene, "geometric", {})
+    assert sorted(graph.parents("plank")) == ["ground", "wall_0"] and graph.structure == ["wall_0"]
+    # the same plank standing upright against the wall is held from below: no wall edge
+    upright = Scene([replace(plank_scene.objects[0], pose=leaning_pose(PLANK, 90.0))], structure=[WALL])
+    assert topology.infer(upright, "geometric", {}).parents("plank") == ["ground"]
