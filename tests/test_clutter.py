@@ -218,3 +218,17 @@ def test_geometric_backend_finds_the_wall_a_plank_leans_on(plank_scene):
     # the same plank standing upright against the wall is held from below: no wall edge
     upright = Scene([replace(plank_scene.objects[0], pose=leaning_pose(PLANK, 90.0))], structure=[WALL])
     assert topology.infer(upright, "geometric", {}).parents("plank") == ["ground"]
+
+
+def test_sdf_stage_pushes_an_object_out_of_a_wall(cache):
+    from phiscene.assembly.penetration import PenetrationParams, resolve_penetration, sdf_body
+
+    params = PenetrationParams()
+    box = trimesh.creation.box((0.2, 0.2, 0.2))
+    # a box resting on the ground whose back face is 3 cm inside the wall x = 0
+    body = sdf_body("box", box, make_pose(translation=(0.07, 0.0, 0.1 + params.eps)), 512, params, cache)
+    x, _ = resolve_penetration(body, [], 0.0, params, planes=[WALL])
+    # the hinge stops where every sample clears the wall by eps: a move of 3 cm + eps along the wall's normal
+    assert x[0] == pytest.approx(0.03 + params.eps, abs=2e-3) and abs(x[1]) < 1e-3 and abs(x[2]) < 2e-3
+    x0, _ = resolve_penetration(body, [], 0.0, params)
+    assert np.linalg.norm(x0) < 1e-3  # without the wall there is nothing to resolve
