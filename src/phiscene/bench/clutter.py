@@ -8,6 +8,7 @@ at the far side of the reference camera) and a floor quadrant holding several co
 * ``lean_object``: a plank or book leaning on a box or wall panel (:func:`~phiscene.bench.templates.leaning`);
 * ``bridge``: a plank bridging two supports (:func:`~phiscene.bench.templates.bridge`);
 * ``container``: 1-3 objects in a tray or crate (:func:`~phiscene.bench.templates.containment`);
+* ``bowl``: 1-3 objects in a bowl or a basket (:mod:`phiscene.bench.clutter_assets`);
 * ``wall_lean``: a plank, book or panel leaning on a wall (supporters: the ground and the wall plane);
 * ``shelf``: a low shelf against a wall with 1-3 objects on its lower levels (bottom and second board);
 * ``table``: a dining table with one or two chairs tucked under it (seat under the top, back outside its
@@ -30,14 +31,11 @@ Suite defaults (:data:`CLUTTER_DEFAULTS`) set 5-20 objects, stacks of 3-5 and a 
 from __future__ import annotations
 
 from dataclasses import replace
-from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 
-from phiscene.bench.assets import COLORS, WOOD, Asset, asset_library, box_mesh, by_category
-from phiscene.bench.cleanmesh import canonical
-from phiscene.bench.furniture import furniture_asset
+from phiscene.bench.assets import Asset, by_category
+from phiscene.bench.clutter_assets import clutter_library
 from phiscene.bench.rooms import add_top
 from phiscene.bench.templates import (
     FILLER_CATEGORIES,
@@ -75,10 +73,6 @@ WALL_FRAMES = {"wall_0": (0.0, np.array([0.0, -1.0])), "wall_1": (-np.pi / 2, np
 #: Placeholder supporter of a wall group, replaced by the wall's id when the group is placed.
 WALL = "WALL"
 
-#: Furniture of the clutter library (category, count).
-FURNITURE = (("shelf", 3), ("dining_table", 2), ("chair", 3), ("vase", 2), ("lamp", 1))
-#: Wall-fixed items of the clutter library (category, count).
-WALL_ITEMS = (("poster", 3), ("frame", 3), ("wall_shelf", 3))
 
 #: Height range (m) of the bottom of wall-fixed items.
 MOUNT_HEIGHT = (1.05, 1.35)
@@ -93,56 +87,6 @@ CLUTTER_DEFAULTS: dict = {
     "template": {"region": 0.9, "clearance": 0.04, "stack_min": 3, "stack_max": 5},
     "render": {"width": 640, "height": 480, "min_visible_pixels": 30},
 }
-
-
-# -- library ------------------------------------------------------------------------------------------------
-def wall_item(category: str, name: str, rng: np.random.Generator) -> Asset:
-    """A thin box fixed to a wall: ``poster`` (paper), ``frame`` (a framed picture) or ``wall_shelf`` (a board).
-
-    Local frame: the wall side is ``+y``; a shelf board's top face is up.
-    """
-    u = rng.uniform
-    if category == "poster":
-        size = np.round([u(0.3, 0.6), u(0.004, 0.008), u(0.4, 0.8)], 3)
-        cname, rgb = _choose_color(rng, ("red", "blue", "yellow", "teal", "white"))
-        desc = f"{cname} poster on the wall {int(round(100 * size[2]))} cm"
-    elif category == "frame":
-        size = np.round([u(0.25, 0.5), u(0.02, 0.035), u(0.2, 0.45)], 3)
-        cname, rgb = _choose_color(rng, ("black", "white", "brown"))
-        desc = f"{cname} framed picture on the wall {int(round(100 * size[0]))} cm"
-    elif category == "wall_shelf":
-        size = np.round([u(0.45, 0.8), u(0.18, 0.25), u(0.02, 0.03)], 3)
-        cname, rgb = sorted(WOOD.items())[int(rng.integers(len(WOOD)))]
-        desc = f"{cname} wall-mounted shelf {int(round(100 * size[0]))} cm"
-    else:
-        raise ValueError(f"unknown wall item {category!r}")
-    return Asset(name, desc, category, rgb, lambda: canonical(box_mesh(size), name=name), {"size": size.tolist()},
-                 {"box": size.tolist()})
-
-
-def _choose_color(rng: np.random.Generator, names: tuple[str, ...]) -> tuple[str, tuple[int, int, int]]:
-    name = names[int(rng.integers(len(names)))]
-    return name, COLORS[name]
-
-
-@lru_cache(maxsize=8)
-def clutter_library(seed: int, n: int, cache_dir: Path | None = None) -> tuple[Asset, ...]:
-    """The deterministic asset library of the clutter suite.
-
-    The contact library of the same seed and size (:func:`phiscene.bench.assets.asset_library`), then
-    the furniture of :data:`FURNITURE` (designs of :mod:`phiscene.bench.furniture`) and the wall items
-    of :data:`WALL_ITEMS` (:func:`wall_item`), each drawn from ``default_rng([seed, 3_000_017, i])``.
-    """
-    out = list(asset_library(seed, n, cache_dir))
-    i = 0
-    for table, make in ((FURNITURE, furniture_asset), (WALL_ITEMS, wall_item)):
-        for category, count in table:
-            for k in range(count):
-                asset = make(category, f"{category}_{k + 1:02d}", np.random.default_rng([seed, 3_000_017, i]))
-                asset.cache_dir = None if cache_dir is None else Path(cache_dir)
-                out.append(asset)
-                i += 1
-    return tuple(out)
 
 
 # -- groups --------------------------------------------------------------------------------------------------
@@ -170,6 +114,52 @@ def bridge_group(library, rng, params) -> list[Placement]:
 def container_group(library, rng, params) -> list[Placement]:
     """1-3 objects in a tray or crate."""
     return _strip(containment(library, 4, rng, params))
+
+
+#: Categories that go into bowls and baskets.
+BOWL_ITEMS = ("blob", "ball", "can", "prop", "box")
+#: How far (m) an object in a bowl or basket must rise above its rim (so the reference view sees it).
+RIM_CLEARANCE = 0.01
+#: Objects drawn for a bowl or basket before it keeps what fitted.
+CONTENT_TRIES = 10
+
+
+def bowl_group(library, rng, params) -> list[Placement]:
+    """1-3 small objects in a bowl or a basket (``contains`` in the ground truth)."""
+    container = _choose(rng, by_category(library, "bowl", "basket"), "bowl or basket")
+    R = rotation_z(_yaw(rng))
+    c_pose = pose_resting_on(container, R, (0.0, 0.0), 0.0, _gap(rng, params))
+    floor = float(c_pose[2, 3] + container.meta["floor"])
+    inner = np.asarray(container.meta["inner"], dtype=float)
+    rim = float(world_bounds(container, c_pose)[1, 2])
+    round_ = bool(container.meta.get("round", False))
+    margin = params.container_margin
+    fits = [a for a in by_category(library, *BOWL_ITEMS) if 2 * footprint_radius(a) + 2 * margin <= inner.min()]
+    group = [Placement(container, c_pose, "container")]
+    discs: list[tuple[np.ndarray, float]] = []
+    want = int(rng.integers(1, 4))
+    for _ in range(CONTENT_TRIES):
+        if not fits or len(group) > want:
+            break
+        asset = _choose(rng, fits, "object that fits in the container")
+        r = footprint_radius(asset)
+        room = inner / 2 - r - margin
+        for _ in range(params.scatter_tries):
+            local = rng.uniform(-1, 1, size=2) * room
+            inside = np.linalg.norm(local) <= room.min() if round_ else True
+            if inside and all(np.linalg.norm(local - c) >= r + rc + margin for c, rc in discs):
+                break
+        else:
+            continue
+        discs.append((local, r))
+        pose = pose_resting_on(asset, rotation_z(_yaw(rng)), R[:2, :2] @ local, floor, _gap(rng, params))
+        if world_bounds(asset, pose)[1, 2] < rim + RIM_CLEARANCE:  # below the rim it would be hidden in the render
+            discs.pop()
+            continue
+        group.append(Placement(asset, pose, "content", (0,)))
+    if len(group) == 1:
+        raise TemplateError(f"nothing fits in {container.name}")
+    return group
 
 
 def wall_lean_group(library, rng, params) -> list[Placement]:
@@ -309,7 +299,8 @@ def wall_shelf_group(library, rng, params) -> list[Placement]:
 #: Group builders: name -> (builder, against a wall).
 GROUPS = {
     "stack": (stack_group, False), "lean_object": (lean_object_group, False), "bridge": (bridge_group, False),
-    "container": (container_group, False), "table": (table_group, False), "wall_lean": (wall_lean_group, True),
+    "container": (container_group, False), "bowl": (bowl_group, False), "table": (table_group, False),
+    "wall_lean": (wall_lean_group, True),
     "shelf": (shelf_group, True), "poster": (mounted_group("poster"), True), "frame": (mounted_group("frame"), True),
     "wall_shelf": (wall_shelf_group, True),
 }
@@ -457,11 +448,11 @@ def _template(core: tuple[str, ...], extras: tuple[str, ...], doc: str):
 
 #: The clutter templates: name -> (core groups, extra groups).
 CLUTTER_TEMPLATES = {
-    "stacks": (("stack", "wall_lean", "poster", "stack"), ("container", "lean_object", "frame")),
+    "stacks": (("stack", "wall_lean", "poster", "stack"), ("container", "bowl", "lean_object", "frame")),
     "leaning": (("wall_lean", "lean_object", "frame", "wall_lean"), ("stack", "bridge", "container")),
-    "bridges": (("bridge", "stack", "wall_shelf"), ("bridge", "lean_object", "container", "poster")),
-    "storage": (("shelf", "container", "wall_shelf"), ("container", "stack", "frame")),
-    "dining": (("table", "wall_lean", "poster"), ("container", "stack", "shelf")),
+    "bridges": (("bridge", "stack", "wall_shelf"), ("bridge", "lean_object", "bowl", "poster")),
+    "storage": (("shelf", "bowl", "wall_shelf"), ("container", "bowl", "stack", "frame")),
+    "dining": (("table", "wall_lean", "poster"), ("container", "bowl", "stack", "shelf")),
 }
 
 for _name, (_core, _extras) in CLUTTER_TEMPLATES.items():

@@ -30,7 +30,7 @@ from phiscene.tolerances import GRAVITY
 from phiscene.transforms import decompose, rotation_angle
 
 #: Categories whose support is reported as ``contains``.
-CONTAINERS = ("tray", "crate")
+CONTAINERS = ("tray", "crate", "bowl", "basket")
 
 
 @dataclass(frozen=True)
@@ -271,7 +271,7 @@ def support_edges(scene: Scene, measured: Release, settings: SimSettings, proxie
       ``removal_move_m`` within ``removal_seconds`` once B is removed (a board leaning
       on a vertical wall gets no lift from it).
 
-    The relation is ``contains`` for a tray or crate, ``leans_on`` when the contact normals
+    The relation is ``contains`` for a container (:data:`CONTAINERS`), ``leans_on`` when the contact normals
     (normal forces summed) are tilted more than ``lean_angle_deg`` from the vertical or the
     support is sideways, else ``supports``; the ground only ever ``supports``, a wall or ceiling
     plane (``scene.structure``, named by its id) only ever ``leans_on``. An attached object
