@@ -22,7 +22,8 @@ at random; the remaining objects are free-standing fillers. Wall groups are buil
 origin (as the contact templates build them) and moved, tallest first, to the free spot farthest
 from the reference camera among ``scatter_tries`` random draws, so that small objects end in front
 and stay visible. A spot is free when the group's world AABB, grown by ``params.clearance``,
-overlaps no other group's; the quadrant grows by 10 % after a round of draws without one.
+overlaps no other group's and neither hides the other from the reference camera (:func:`hides`);
+the quadrant grows by 10 % after a round of draws without one.
 
 Suite defaults (:data:`CLUTTER_DEFAULTS`) set 5-20 objects, stacks of 3-5 and a larger render
 (640 x 480) so small objects stay visible in a room-sized view.
@@ -309,6 +310,8 @@ GROUPS = {
 # -- layout ---------------------------------------------------------------------------------------------------
 #: Horizontal direction (2,) from the scene towards the reference camera (``render.azimuth_deg`` -60 deg).
 TOWARDS_CAMERA = np.array([np.cos(np.radians(-60.0)), np.sin(np.radians(-60.0))])
+#: Elevation (deg) of the reference camera (``render.elevation_deg``).
+CAMERA_ELEVATION_DEG = 35.0
 #: Rounds of ``scatter_tries`` draws (the floor grows by 10 % after each) before a group is given up.
 GROW_ROUNDS = 15
 
@@ -322,11 +325,12 @@ class Corner:
         self.params = params
 
     def free(self, box: np.ndarray) -> bool:
-        """Whether an AABB (2, 3) lies in the room and keeps ``clearance`` from every placed one."""
+        """Whether an AABB (2, 3) lies in the room, keeps ``clearance`` from every placed one and hides none."""
         c = self.params.clearance
         if box[0, 0] < -1e-9 or box[1, 1] > 1e-9:
             return False
-        return all((box[1] + c <= b[0]).any() or (b[1] + c <= box[0]).any() for b in self.boxes)
+        return all(((box[1] + c <= b[0]).any() or (b[1] + c <= box[0]).any())
+                   and not hides(box, b) and not hides(b, box) for b in self.boxes)
 
     def place(self, group: list[Placement], wall: str | None, rng: np.random.Generator) -> bool:
         """Move ``group`` to a free spot; ``False`` after :data:`GROW_ROUNDS` rounds.
@@ -370,6 +374,27 @@ class Corner:
                 return True
             self.extent *= 1.1
         return False
+
+
+def hides(front: np.ndarray, back: np.ndarray) -> bool:
+    """Whether AABB ``front`` (2, 3) stands between the reference camera and the lower part of AABB ``back``.
+
+    Seen from the camera (:data:`TOWARDS_CAMERA`, :data:`CAMERA_ELEVATION_DEG`), ``front`` hides ``back`` when
+    their extents across the view overlap, ``front`` is nearer, and the sight line over its top does not
+    reach the bottom of ``back``: the gap between them along the view is below
+    ``(top of front - bottom of back) / tan(elevation)``.
+    """
+    across = np.array([-TOWARDS_CAMERA[1], TOWARDS_CAMERA[0]])
+
+    def spans(box):
+        xy = np.array([[box[i, 0], box[j, 1]] for i in (0, 1) for j in (0, 1)])
+        return xy @ TOWARDS_CAMERA, xy @ across
+
+    (df, af), (db, ab) = spans(front), spans(back)
+    if af.min() >= ab.max() or ab.min() >= af.max():
+        return False
+    gap = df.min() - db.max()
+    return gap >= 0 and gap < (front[1, 2] - back[0, 2]) / np.tan(np.radians(CAMERA_ELEVATION_DEG))
 
 
 def _group_box(group: list[Placement]) -> np.ndarray:
