@@ -59,7 +59,7 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
     scene = load_scene(scene_path)
     graph = topology.load(topology_path, scene_ids=scene.ids)
     proxies = read_proxies(proxies_path)
-    fixed = {oid: "ground" for oid in attached_ids(graph)}
+    fixed = dict(attached_ids(graph, holders=True))
     fixed.update({o.id: o.attached for o in scene.objects if o.attached is not None})
     settled, record = ground_scene(scene, graph.order, proxies, AssemblyParams.from_dict(assembly),
                                    SimSettings.from_dict(sim), Path(cache_dir), progress=progress or log.info,

@@ -264,15 +264,13 @@ def graph_layers(graph) -> dict[str, int]:
     """
     import networkx as nx
 
-    from phiscene.topology.graph import GROUND
-
     g = graph.to_networkx(include_ground=True)
     cond = nx.condensation(g)
     layer_of_scc: dict[int, int] = {}
     for c in nx.topological_sort(cond):
         members = cond.nodes[c]["members"]
         preds = list(cond.predecessors(c))
-        base = 0 if GROUND in members else 1
+        base = 0 if members & graph.fixed_nodes else 1  # the ground and walls at the bottom
         layer_of_scc[c] = max([base] + [layer_of_scc[p] + 1 for p in preds])
     return {n: layer_of_scc[cond.graph["mapping"][n]] for n in g.nodes}
 
@@ -291,7 +289,7 @@ def graph_positions(graph) -> dict[str, tuple[float, float]]:
     rank = {n: k for k, n in enumerate(graph.order or graph.object_ids)}
     pos: dict[str, tuple[float, float]] = {}
     for L in range(max(layers.values()) + 1):
-        nodes = [n for n in graph.objects if layers[n] == L]
+        nodes = [n for n in [*graph.objects, *graph.structure] if layers[n] == L]
 
         def key(n: str) -> tuple[float, int]:
             xs = [pos[p][0] for p in graph.parents(n) if p in pos]
@@ -342,7 +340,7 @@ def support_graph_figure(topology_json: str | Path, out_png: str | Path, title: 
     height = max(GRAPH_MIN_PX[1], GRAPH_SLOT_PX[1] * (n_layers + 1))
     kept, dropped = nx.DiGraph(), nx.DiGraph()
     for g, edges in ((kept, graph.edges), (dropped, graph.dropped_edges)):
-        g.add_nodes_from(graph.objects)
+        g.add_nodes_from([*graph.objects, *graph.structure])
         for e in edges:
             g.add_edge(e.source, e.target, relation=e.relation)
     objects = graph.object_ids
@@ -352,7 +350,8 @@ def support_graph_figure(topology_json: str | Path, out_png: str | Path, title: 
     with _rc():
         fig = _figure(width, height)
         ax = fig.add_axes((0.02, 0.02, 0.96, 0.86))
-        nx.draw_networkx_nodes(kept, pos, nodelist=[GROUND], node_shape="s", node_color=[(0.6, 0.5, 0.4)],
+        fixed = [GROUND, *graph.structure]  # the ground and the walls: brown squares
+        nx.draw_networkx_nodes(kept, pos, nodelist=fixed, node_shape="s", node_color=[(0.6, 0.5, 0.4)] * len(fixed),
                                node_size=node_size * 1.6, ax=ax)
         nx.draw_networkx_nodes(kept, pos, nodelist=objects, node_color=fill, edgecolors="black", linewidths=0.8,
                                node_size=node_size, ax=ax)

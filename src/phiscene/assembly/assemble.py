@@ -164,6 +164,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     with world_cm as world:
         if params.settle:
             world.add_ground(scene.ground_height)
+            world.add_structure(scene.structure)  # walls and ceiling: static colliders
         for index, oid in enumerate(order):
             obj = scene.get(oid)
             initial = np.asarray(obj.pose, dtype=float)
@@ -198,7 +199,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
 
             t0 = time.perf_counter()
             if params.penetration:
-                pose = _resolve(oid, obj.mesh(), pose, placed, scene.ground_height, pp, cache_dir, rec)
+                pose = _resolve(oid, obj.mesh(), pose, placed, scene.ground_height, pp, cache_dir, rec,
+                                scene.structure)
             else:
                 rec.update(sdf_iterations=0, sdf_initial_loss=None, sdf_final_loss=None,
                            sdf_translation=[0.0, 0.0, 0.0], sdf_context=[], sdf_grid_error=None)
@@ -275,10 +277,10 @@ def _fix(world, oid: str, mesh, proxy: Proxy | None, pose: np.ndarray, sim: SimS
 
 
 def _resolve(oid: str, mesh, pose: np.ndarray, placed: list[SdfBody], ground_height: float,
-             pp: PenetrationParams, cache_dir: Path, rec: dict) -> np.ndarray:
-    """SDF stage: the pose (4, 4) translated clear of ``placed`` and the ground; fills ``rec``."""
+             pp: PenetrationParams, cache_dir: Path, rec: dict, planes=()) -> np.ndarray:
+    """SDF stage: the pose (4, 4) translated clear of ``placed``, the ground and ``planes``; fills ``rec``."""
     active = sdf_body(oid, mesh, pose, pp.n_active, pp, cache_dir)
-    x, info = resolve_penetration(active, placed, ground_height, pp)
+    x, info = resolve_penetration(active, placed, ground_height, pp, planes)
     rec.update(sdf_iterations=info["iterations"], sdf_initial_loss=_round(info["initial_loss"]),
                sdf_final_loss=_round(info["final_loss"]), sdf_translation=[_round(v) for v in x],
                sdf_context=info["context"],

@@ -181,7 +181,7 @@ class _Loss:
     """The clearance loss of one active body against a fixed context and the ground."""
 
     def __init__(self, active: SdfBody, context: list[SdfBody], ground_height: float | None, eps: float,
-                 extreme_points: bool):
+                 extreme_points: bool, planes=()):
         import torch
 
         self.active, self.context, self.eps = active, context, eps
@@ -189,6 +189,9 @@ class _Loss:
         self.P = torch.as_tensor(active.samples())
         ground_pts = np.vstack([active.samples(), active.hull()]) if extreme_points else active.samples()
         self.G = torch.as_tensor(ground_pts[:, 2])
+        # walls and ceiling: half-spaces like the ground, analytic SDF n . p + d on the same points
+        self.planes = [(torch.as_tensor(ground_pts @ np.asarray(p.normal, dtype=float) + p.offset),
+                        torch.as_tensor(np.asarray(p.normal, dtype=float))) for p in planes]
         self.Q = [torch.as_tensor(k.samples()) for k in context]
         self.aabb_active = active.aabb()
         self.aabbs = [k.aabb() for k in context]
@@ -209,6 +212,8 @@ class _Loss:
         total = x.new_zeros(())
         if self.ground_height is not None:
             total = total + torch.relu(eps - (self.G + x[2] - self.ground_height)).sum()
+        for dist, normal in self.planes:
+            total = total + torch.relu(eps - (dist + x @ normal)).sum()
         idx = self.near(x.detach().numpy())
         if idx:
             self.used.update(self.context[i].id for i in idx)
@@ -257,8 +262,8 @@ class AdamState:
 
 
 def resolve_penetration(active: SdfBody, context: list[SdfBody], ground_height: float | None,
-                        params: PenetrationParams) -> tuple[np.ndarray, dict]:
-    """Translation of ``active`` that clears its settled context and the ground by ``eps``.
+                        params: PenetrationParams, planes=()) -> tuple[np.ndarray, dict]:
+    """Translation of ``active`` that clears its settled context, the ground and the walls by ``eps``.
 
     Parameters
     ----------
@@ -270,6 +275,9 @@ def resolve_penetration(active: SdfBody, context: list[SdfBody], ground_height: 
         Height of the ground plane, or ``None`` for no ground.
     params
         Solver parameters.
+    planes
+        Walls and ceiling (:class:`phiscene.scene.Plane`, ``Scene.structure``): half-spaces with the
+        analytic SDF ``n . p + d``, on the same points as the ground term.
 
     Returns
     -------
@@ -280,7 +288,7 @@ def resolve_penetration(active: SdfBody, context: list[SdfBody], ground_height: 
         steps used), ``context`` (ids that were ever within reach), ``seconds``.
     """
     t0 = time.perf_counter()
-    loss_fn = _Loss(active, context, ground_height, params.eps, params.ground_extreme_points)
+    loss_fn = _Loss(active, context, ground_height, params.eps, params.ground_extreme_points, planes)
     x, info = minimize_hinge(loss_fn, (3,), params.lr, params.max_iterations, params.backtrack_steps)
     info.update(context=sorted(loss_fn.used), seconds=time.perf_counter() - t0)
     return x, info

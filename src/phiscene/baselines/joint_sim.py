@@ -132,6 +132,7 @@ def joint_sim(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, params:
     frames = 0
     with BulletWorld(sim, cache_dir) as world:
         world.add_ground(scene.ground_height)
+        world.add_structure(scene.structure)  # walls and ceiling: static colliders
         for o in scene.objects:
             hulls = proxies[o.id].hulls
             world.add_body(o.id, hulls, o.pose, rigid_props(o.mesh(), hulls, sim.density, decompose(o.pose)[2]))

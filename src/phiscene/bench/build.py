@@ -9,7 +9,7 @@ Output layout::
 
     out_dir/meshes/obj_XX.glb           local-frame meshes (shared by gt and initial)
     out_dir/gt/scene.json               ground truth at rest
-    out_dir/gt/topology.json            GT support graph (backend "gt")
+    out_dir/gt/topology.json            GT support graph (backend "gt"; walls as ``structure`` nodes)
     out_dir/initial/scene.json          degraded scene
     out_dir/reference/image.png         RGB render of the GT scene
     out_dir/reference/segmentation.png  instance colours (= objects' "color"), black background
@@ -31,7 +31,7 @@ import numpy as np
 
 from phiscene import schemas
 from phiscene.atomic import write_json
-from phiscene.bench import rooms  # noqa: F401  (registers the rooms suite: templates, library, defaults)
+from phiscene.bench import clutter, rooms  # noqa: F401  (register the rooms and clutter suites)
 from phiscene.bench.assets import ASSET_VERSION, asset_library
 from phiscene.bench.degrade import DegradeParams, degrade_scene
 from phiscene.bench.foundation import foundation_scene
@@ -145,7 +145,10 @@ def object_ids(n: int) -> list[str]:
 
 
 def _write_meshes(placements: list[Placement], order: np.ndarray, mesh_dir: Path) -> Scene:
-    """Save the placements' meshes as ``obj_XX.glb`` (ids in shuffled ``order``) and return the scene."""
+    """Save the placements' meshes as ``obj_XX.glb`` (ids in shuffled ``order``) and return the scene.
+
+    The scene's ``structure`` is the placements' (a :class:`~phiscene.bench.templates.Layout`), or empty.
+    """
     ids = object_ids(len(placements))
     colors = segmentation_colors(len(placements))
     id_of = {int(k): ids[j] for j, k in enumerate(order)}
@@ -153,13 +156,13 @@ def _write_meshes(placements: list[Placement], order: np.ndarray, mesh_dir: Path
     for j, k in enumerate(order):
         pl = placements[int(k)]
         path = save_mesh(pl.asset.mesh, mesh_dir / f"{ids[j]}.glb")
-        intended = sorted("ground" if s == GROUND else id_of[s] for s in pl.supporters)
+        intended = sorted("ground" if s == GROUND else s if isinstance(s, str) else id_of[s] for s in pl.supporters)
         objects.append(SceneObject(id=ids[j], mesh_path=path.resolve(), pose=np.array(pl.pose, dtype=float),
                                    description=pl.asset.description, color=colors[j],
                                    meta={"asset": pl.asset.name, "category": pl.asset.category,
                                          "rgb": [int(c) for c in pl.asset.rgb], "role": pl.role,
-                                         "intended_supporters": intended}))
-    return Scene(objects=objects, ground_height=0.0)
+                                         "intended_supporters": intended}, attached=pl.attached))
+    return Scene(objects=objects, ground_height=0.0, structure=list(getattr(placements, "structure", [])))
 
 
 def _attempt(suite: str, template: str, n_objects: int, library: tuple, rng: np.random.Generator,
@@ -274,6 +277,8 @@ def _write_outputs(root: Path, gt: GroundTruth, camera: dict, images: tuple, p: 
     save_png(labels_to_colors(labels, colors), root / "reference" / "segmentation.png")
     topology = {"format": "phiscene.topology/1", "backend": "gt", "objects": ["ground", *gt_scene.ids],
                 "edges": gt.edges, "order": [], "dropped_edges": []}
+    if gt_scene.structure:  # walls as supporter nodes (phiscene.topology.graph)
+        topology["structure"] = [p.id for p in gt_scene.structure]
     topo_path = root / "gt" / "topology.json"
     schemas.validate(topology, "topology", topo_path)
     write_json(topo_path, topology)

@@ -30,7 +30,7 @@ from phiscene.tolerances import GRAVITY
 from phiscene.transforms import decompose, rotation_angle
 
 #: Categories whose support is reported as ``contains``.
-CONTAINERS = ("tray", "crate")
+CONTAINERS = ("tray", "crate", "bowl", "basket")
 
 
 @dataclass(frozen=True)
@@ -117,22 +117,35 @@ def scene_world(scene: Scene, settings: SimSettings, proxies: dict[str, Proxy],
                 cache_dir: str | Path) -> Iterator[tuple[BulletWorld, dict[str, float]]]:
     """A pybullet world with the ground and every object of ``scene`` as a dynamic body.
 
+    Walls and ceiling (``scene.structure``) are static planes named by their ids; attached objects
+    are static bodies (never moved).
+
     Yields
     ------
     world
         The open :class:`BulletWorld`.
     masses
-        Mass (kg) of each object, by id.
+        Mass (kg) of each free object, by id (attached objects have none).
     """
     with BulletWorld(settings, cache_dir) as world:
         world.add_ground(scene.ground_height)
+        world.add_structure(scene.structure)
         masses = {}
         for o in scene.objects:
             hulls = proxies[o.id].hulls
+            if o.attached is not None:  # fixed to a wall (or the ground): a static collider, no mass
+                world.add_body(o.id, hulls, o.pose, None)
+                continue
             props = rigid_props(o.mesh(), hulls, settings.density, decompose(o.pose)[2])
             world.add_body(o.id, hulls, o.pose, props)
             masses[o.id] = props.mass
         yield world, masses
+
+
+def _poses(scene: Scene, world: BulletWorld) -> dict[str, np.ndarray]:
+    """Every object's pose (4, 4) in ``world``; attached objects keep their scene pose exactly (no round trip)."""
+    return {o.id: np.array(o.pose, dtype=float) if o.attached is not None else world.pose(o.id)
+            for o in scene.objects}
 
 
 def _still(world: BulletWorld, ids: list[str], params: GTParams) -> bool:
@@ -162,7 +175,7 @@ def settle(scene: Scene, settings: SimSettings, proxies: dict[str, Proxy], cache
             world.step_frames(1)
             frame += 1
             still = still + 1 if _still(world, scene.ids, params) else 0
-        return {i: world.pose(i) for i in scene.ids}, frame
+        return _poses(scene, world), frame
 
 
 @dataclass
@@ -209,10 +222,11 @@ def release(scene: Scene, settings: SimSettings, proxies: dict[str, Proxy], cach
                 for c in world.contacts(o.id):
                     key = (o.id, c["other"])
                     normal[key] = normal.get(key, 0.0) + c["normal"] * c["force"] / n_avg
-        for (a, b), f in list(normal.items()):  # contacts with the ground are only listed from the object's side
-            if b == "ground":
+        objects = set(scene.ids)
+        for (a, b), f in list(normal.items()):  # contacts with ground and walls are only listed from the object's side
+            if b not in objects:
                 normal[(b, a)] = -f
-        end = {o.id: world.pose(o.id) for o in scene.objects}
+        end = _poses(scene, world)
     drift_m, drift_deg = {}, {}
     for o in scene.objects:
         R0, t0, _ = decompose(o.pose)
@@ -234,10 +248,15 @@ def forces_on(forces: dict[tuple[str, str], np.ndarray]) -> dict[tuple[str, str]
 def moves_without(scene: Scene, removed: str, settings: SimSettings, proxies: dict[str, Proxy],
                   cache_dir: str | Path, params: GTParams) -> dict[str, float]:
     """How far (m) each remaining object moves in ``removal_seconds`` once ``removed`` is taken away."""
-    kept = Scene([o for o in scene.objects if o.id != removed], scene.ground_height)
+    kept = Scene([o for o in scene.objects if o.id != removed], scene.ground_height,
+                 structure=[p for p in scene.structure if p.id != removed])
     with scene_world(kept, settings, proxies, cache_dir) as (world, _):
         world.step_frames(max(1, int(round(params.removal_seconds / settings.frame_dt))))
         return {o.id: float(np.linalg.norm(world.pose(o.id)[:3, 3] - o.pose[:3, 3])) for o in kept.objects}
+
+
+#: Relation of an object fixed to a wall (or the ground): the edge ``holder -> object``.
+ATTACHED = "attached"
 
 
 def support_edges(scene: Scene, measured: Release, settings: SimSettings, proxies: dict[str, Proxy],
@@ -252,9 +271,11 @@ def support_edges(scene: Scene, measured: Release, settings: SimSettings, proxie
       ``removal_move_m`` within ``removal_seconds`` once B is removed (a board leaning
       on a vertical wall gets no lift from it).
 
-    The relation is ``contains`` for a tray or crate, ``leans_on`` when the contact normals
+    The relation is ``contains`` for a container (:data:`CONTAINERS`), ``leans_on`` when the contact normals
     (normal forces summed) are tilted more than ``lean_angle_deg`` from the vertical or the
-    support is sideways, else ``supports``; the ground only ever ``supports``.
+    support is sideways, else ``supports``; the ground only ever ``supports``, a wall or ceiling
+    plane (``scene.structure``, named by its id) only ever ``leans_on``. An attached object
+    (:attr:`~phiscene.scene.SceneObject.attached`) gets exactly one edge, ``attached`` from what holds it.
 
     Parameters
     ----------
@@ -270,6 +291,7 @@ def support_edges(scene: Scene, measured: Release, settings: SimSettings, proxie
     Edges ``{"from": b, "to": a, "relation", "confidence": 1.0, "reason"}`` sorted by (to, from).
     """
     categories = {o.id: o.meta.get("category", "") for o in scene.objects}
+    planes = {p.id for p in scene.structure}
     masses = measured.masses
     on = forces_on(measured.forces)
     removal: dict[str, dict[str, float]] = {}
@@ -299,8 +321,13 @@ def support_edges(scene: Scene, measured: Release, settings: SimSettings, proxie
                       f"{params.removal_seconds:g} s")
         else:
             continue
-        relation = "contains" if categories.get(b) in CONTAINERS else "leans_on" if lean else "supports"
+        relation = "contains" if categories.get(b) in CONTAINERS else "leans_on" if lean or b in planes \
+            else "supports"
         edges.append({"from": b, "to": a, "relation": relation, "confidence": 1.0, "reason": reason})
+    for o in scene.objects:
+        if o.attached is not None:
+            edges.append({"from": o.attached, "to": o.id, "relation": ATTACHED, "confidence": 1.0,
+                          "reason": f"fixed to {o.attached}"})
     edges.sort(key=lambda e: (e["to"], e["from"]))
     return edges
 

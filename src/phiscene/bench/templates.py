@@ -111,13 +111,30 @@ class Placement:
     role
         What the object is for in the template (``base``, ``top``, ``board``, ``deck``, ``content``, ...).
     supporters
-        Indices (into the placement list) of the objects it should rest on; :data:`GROUND` for the ground.
+        Indices (into the placement list) of the objects it should rest on; :data:`GROUND` for the ground;
+        a string is the id of a structure plane (a wall it leans on or is fixed to).
+    attached
+        ``None`` for a free rigid body, else the id of the structure plane it is fixed to
+        (:attr:`phiscene.scene.SceneObject.attached`).
     """
 
     asset: Asset
     pose: np.ndarray
     role: str
-    supporters: tuple[int, ...] = (GROUND,)
+    supporters: tuple[int | str, ...] = (GROUND,)
+    attached: str | None = None
+
+
+class Layout(list):
+    """A template's placements (a list of :class:`Placement`) plus the scene's walls.
+
+    Templates of suites with walls return this instead of a plain list; ``structure`` holds the
+    :class:`phiscene.scene.Plane` walls and ceiling (empty by default).
+    """
+
+    def __init__(self, placements=(), structure=()):
+        super().__init__(placements)
+        self.structure = list(structure)
 
 
 class TemplateError(RuntimeError):

@@ -153,6 +153,7 @@ def drift_bullet(scene: "Scene", proxies: dict[str, "Proxy"], params: DriftParam
     floor = ground_below(scene)
     with BulletWorld(sim, cache_dir) as world:
         world.add_ground(floor)
+        world.add_structure(scene.structure)  # walls and ceiling: static colliders (a leaning board stays up)
         for o in scene.objects:
             hulls = proxies[o.id].hulls
             _, _, scale = decompose(o.pose)

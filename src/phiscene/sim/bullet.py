@@ -203,6 +203,25 @@ class BulletWorld:
         self.bodies["ground"] = _Body(uid, 1.0, np.eye(4), False)
         return uid
 
+    def add_structure(self, planes) -> list[int]:
+        """Walls and ceiling (:class:`phiscene.scene.Plane`) as static infinite planes (pybullet ``GEOM_PLANE``).
+
+        Each plane is a static body named by the plane's id (so contacts and :meth:`contact_forces`
+        name it like an object), with the world's friction; its solid side is the half-space behind
+        the plane (``normal . p + offset < 0``), the room side is free. Returns the body ids.
+        """
+        uids = []
+        for plane in planes:
+            if plane.id in self.bodies:
+                raise ValueError(f"body {plane.id!r} already in the world")
+            n = np.asarray(plane.normal, dtype=float)
+            shape = self.p.createCollisionShape(self.p.GEOM_PLANE, planeNormal=n.tolist())
+            uid = self.p.createMultiBody(0.0, shape, basePosition=(-float(plane.offset) * n).tolist())
+            self._surface(uid)
+            self.bodies[plane.id] = _Body(uid, 1.0, np.eye(4), False)
+            uids.append(uid)
+        return uids
+
     def add_body(self, name: str, hulls: list[np.ndarray], pose: np.ndarray, props: RigidProps | None) -> int:
         """Add an object as a compound of convex hulls.
 

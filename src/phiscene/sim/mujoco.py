@@ -216,6 +216,15 @@ def _contact(geom, sim: SimSettings, mj: MujocoParams, condim: int) -> None:
     geom.solimp = list(mj.solimp)
 
 
+def _frame_with_z(z: np.ndarray) -> np.ndarray:
+    """A rotation (3, 3) whose third column is the unit vector ``z`` (a MuJoCo plane's normal is its local z)."""
+    z = np.asarray(z, dtype=float) / np.linalg.norm(z)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    x = np.cross(helper, z)
+    x /= np.linalg.norm(x)
+    return np.column_stack([x, np.cross(z, x), z])
+
+
 def build_spec(scene: "Scene", proxies: dict[str, "Proxy"], sim: SimSettings, ground_height: float,
                mj: MujocoParams | None = None) -> "mujoco.MjSpec":
     """A MuJoCo model spec of the scene at its current poses, above a ground plane.
@@ -236,7 +245,8 @@ def build_spec(scene: "Scene", proxies: dict[str, "Proxy"], sim: SimSettings, gr
     Returns
     -------
     An uncompiled ``mujoco.MjSpec``: one free body per object named by its id
-    (frame = principal inertial frame), mesh geoms ``<id>/hull<k>`` and a plane ``ground``.
+    (frame = principal inertial frame), mesh geoms ``<id>/hull<k>``, a plane ``ground`` and one plane
+    per wall or ceiling of ``scene.structure`` named by its id.
     """
     import mujoco
 
@@ -254,6 +264,15 @@ def build_spec(scene: "Scene", proxies: dict[str, "Proxy"], sim: SimSettings, gr
     ground.size = [0.0, 0.0, 1.0]  # infinite plane
     ground.pos = [0.0, 0.0, float(ground_height)]
     _contact(ground, sim, mj, condim)
+    for plane in scene.structure:  # walls and ceiling: static half-spaces, solid behind the plane
+        n = np.asarray(plane.normal, dtype=float)
+        wall = spec.worldbody.add_geom()
+        wall.name = plane.id
+        wall.type = mujoco.mjtGeom.mjGEOM_PLANE
+        wall.size = [0.0, 0.0, 1.0]
+        wall.pos = -float(plane.offset) * n
+        wall.quat = matrix_to_quat_wxyz(_frame_with_z(n))
+        _contact(wall, sim, mj, condim)
 
     lin_rate = damping_rate(sim.linear_damping)
     for i, o in enumerate(scene.objects):

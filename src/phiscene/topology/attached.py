@@ -60,6 +60,9 @@ class AttachedParams(Params):
         Ceiling fixtures are only looked for in scenes at least this tall (m).
     samples
         Footprint points per object for the support test.
+    wall_distance
+        An attached object within this distance (m) of a wall or ceiling plane of the scene is fixed to that
+        plane (its ``attached`` edge comes from the plane's id), otherwise to the ground node.
     """
 
     _label = "attachment parameters"
@@ -71,10 +74,11 @@ class AttachedParams(Params):
     ceiling_gap: float = 0.15
     room_height: float = 2.0
     samples: int = 64
+    wall_distance: float = 0.05
 
     def check(self) -> None:
         """Non-negative distances, a ratio in (0, 1), at least 4 samples (``ValueError``)."""
-        if min(self.support_gap, self.min_height, self.ceiling_gap, self.room_height) < 0:
+        if min(self.support_gap, self.min_height, self.ceiling_gap, self.room_height, self.wall_distance) < 0:
             raise ValueError("attachment distances must be >= 0")
         if not 0 < self.thin_ratio < 1 or self.samples < 4:
             raise ValueError("attachment 'thin_ratio' must be in (0, 1) and 'samples' >= 4")
@@ -150,22 +154,42 @@ def attached_objects(scene, params: AttachedParams = AttachedParams()) -> dict[s
     return out
 
 
-def mark_attached(scene, graph: SupportGraph, params: AttachedParams = AttachedParams()) -> SupportGraph:
-    """``graph`` with every attached object's incoming edges replaced by one ``ground -attached-> object`` edge.
+def holder(scene, oid: str, max_distance: float) -> str:
+    """What holds an attached object: its :attr:`~phiscene.scene.SceneObject.attached` value when given, else
+    the structure plane (wall or ceiling) nearest to its mesh when within ``max_distance`` (m), else ``ground``."""
+    obj = scene.get(oid)
+    if obj.attached is not None:
+        return obj.attached
+    if not scene.structure:
+        return GROUND
+    v = obj.world_mesh().vertices
+    dist = {p.id: float(p.signed_distance(v).min()) for p in scene.structure}
+    best = min(dist, key=lambda k: abs(dist[k]))
+    return best if abs(dist[best]) <= max_distance else GROUND
 
-    Edges out of an attached object (what it carries, e.g. a wall shelf) are kept. The decision is recorded in
-    ``graph.meta["attached"]`` (id -> reason).
+
+def mark_attached(scene, graph: SupportGraph, params: AttachedParams = AttachedParams()) -> SupportGraph:
+    """``graph`` with every attached object's incoming edges replaced by one ``attached`` edge from its holder.
+
+    The holder (:func:`holder`) is the wall or ceiling plane it is fixed to when the scene has structure planes
+    (the plane becomes a ``structure`` node of the graph), else the ground node, which then stands for the fixed
+    world. Edges out of an attached object (what it carries, e.g. a wall shelf) are kept. The decision is
+    recorded in ``graph.meta["attached"]`` (id -> reason).
     """
     decided = attached_objects(scene, params)
     if not decided:
         return replace(graph, meta={**graph.meta, "attached": {}})
     edges = [e for e in graph.edges if e.target not in decided]
-    edges += [SupportEdge(GROUND, oid, ATTACHED, 1.0, f"fixed to a wall or the ceiling ({why})")
+    holders = {oid: holder(scene, oid, params.wall_distance) for oid in decided}
+    edges += [SupportEdge(holders[oid], oid, ATTACHED, 1.0, f"fixed to a wall or the ceiling ({why})")
               for oid, why in decided.items()]
-    return replace(graph, edges=edges, meta={**graph.meta, "attached": decided})
+    planes = [p.id for p in scene.structure if p.id in holders.values() or p.id in graph.structure]
+    return replace(graph, edges=edges, meta={**graph.meta, "attached": decided}, structure=planes)
 
 
-def attached_ids(graph: SupportGraph) -> list[str]:
-    """Objects with an ``attached`` edge in a support graph, in node order."""
-    fixed = {e.target for e in graph.edges if e.relation == ATTACHED}
+def attached_ids(graph: SupportGraph, holders: bool = False) -> list[str] | dict[str, str]:
+    """Objects with an ``attached`` edge in a support graph, in node order (``holders``: id -> the edge's source)."""
+    fixed = {e.target: e.source for e in graph.edges if e.relation == ATTACHED}
+    if holders:
+        return {o: fixed[o] for o in graph.object_ids if o in fixed}
     return [o for o in graph.object_ids if o in fixed]

@@ -42,8 +42,10 @@ contact. An edge ``B -> A`` means B carries part of A's weight.
    ``hide_scale * tol`` are added, nearest first, until it is, then objects
    A passes into. If it still is not, side contacts above the support that
    push back against the tipping direction become ``leans_on`` edges (a
-   plank leaning on a wall keeps the ground and the wall). Side contacts of
-   a held object are ignored (boxes touching side by side).
+   plank leaning on a wall keeps the ground and the wall); so do the scene's
+   wall planes (``Scene.structure``) that samples above the support touch
+   (:func:`wall_leaning`). Side contacts of a held object are ignored (boxes
+   touching side by side).
 8. **Fallback.** An object without any support sample gets one edge of
    confidence ``fallback_confidence``, as the paper's MLLM prompt does for
    undetermined support: from the object whose upward surface it passes
@@ -452,8 +454,8 @@ def _confidence(gap: np.ndarray, alignment: float, tol: float) -> float:
 
 
 def supporters_of(a: Body, contacts: ObjectContacts, ancestors: dict[str, set[str]], bodies: dict[str, Body],
-                  params: GeometricParams) -> tuple[list[SupportEdge], dict]:
-    """The support edges into one object (supporters from below, leaning, fallback).
+                  params: GeometricParams, planes=()) -> tuple[list[SupportEdge], dict]:
+    """The support edges into one object (supporters from below, leaning on objects or on ``planes``, fallback).
 
     Returns
     -------
@@ -509,7 +511,30 @@ def supporters_of(a: Body, contacts: ObjectContacts, ancestors: dict[str, set[st
         edges.append(SupportEdge(name, a.id, "leans_on", _confidence(c.gap, align, tols[name]),
                                  f"{len(c)} side contact samples hold the centre of mass, "
                                  f"{100 * dist:.1f} cm outside the support below"))
+    edges += wall_leaning(a, planes, direction, support_z, tols[GROUND], dist, params)
     return edges, info
+
+
+def wall_leaning(a: Body, planes, direction: np.ndarray, support_z: float, tol: float, dist: float,
+                 params: GeometricParams) -> list[SupportEdge]:
+    """``leans_on`` edges from the walls (:class:`phiscene.scene.Plane`) holding up an object tipping in ``direction``.
+
+    A wall counts when at least ``min_contact_points`` of A's samples above its support (``z > support_z``)
+    lie within ``[-penetration_scale * tol, tol]`` of the plane and the wall's normal pushes back against
+    the tipping direction (2,) (a plank leaning on a wall keeps the ground and the wall).
+    """
+    edges = []
+    for plane in planes:
+        n = np.asarray(plane.normal, dtype=float)
+        gap = plane.signed_distance(a.points)
+        near = (gap <= tol) & (gap >= -params.penetration_scale * tol) & (a.points[:, 2] > support_z)
+        if int(near.sum()) < params.min_contact_points or float(n[:2] @ direction) >= 0:
+            continue
+        conf = _confidence(gap[near], float(np.linalg.norm(n[:2])), tol)
+        edges.append(SupportEdge(plane.id, a.id, "leans_on", conf,
+                                 f"{int(near.sum())} samples against {plane.id} hold the centre of mass, "
+                                 f"{100 * dist:.1f} cm outside the support below"))
+    return edges
 
 
 def infer(scene, params: GeometricParams = GeometricParams()) -> SupportGraph:
@@ -521,9 +546,10 @@ def infer(scene, params: GeometricParams = GeometricParams()) -> SupportGraph:
     edges: list[SupportEdge] = []
     diagnostics = {}
     for o in scene.objects:
-        e, info = supporters_of(bodies[o.id], contacts[o.id], ancestors, bodies, params)
+        e, info = supporters_of(bodies[o.id], contacts[o.id], ancestors, bodies, params, scene.structure)
         edges += e
         diagnostics[o.id] = info
+    walls = [p.id for p in scene.structure if any(e.source == p.id for e in edges)]
     graph = SupportGraph(objects=[GROUND] + scene.ids, edges=edges, backend="geometric",
-                         meta={"params": params.to_dict(), "objects": diagnostics})
+                         meta={"params": params.to_dict(), "objects": diagnostics}, structure=walls)
     return finalize(graph, areas={k: b.footprint for k, b in bodies.items()})

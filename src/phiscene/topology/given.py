@@ -43,5 +43,5 @@ def infer(scene, params: GivenParams) -> SupportGraph:
     graph = load(params.path, scene_ids=scene.ids)
     meta = {**graph.meta, "source": str(params.path), "source_backend": graph.backend}
     graph = SupportGraph(objects=graph.objects, edges=graph.edges, dropped_edges=graph.dropped_edges,
-                         backend="given", meta=meta)
+                         backend="given", meta=meta, structure=graph.structure)
     return finalize(graph, scene=scene)

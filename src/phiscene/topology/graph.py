@@ -13,6 +13,12 @@ docs/DESIGN.md §3's topology JSON (schema ``phiscene.topology/1``)::
 
 The ground node is implicit: a file whose ``objects`` omit ``"ground"`` still
 gets it. ``order`` lists every non-ground object exactly once.
+
+Scenes with walls or a ceiling (:attr:`phiscene.scene.Scene.structure`) may name
+those planes as supporter nodes: the optional key ``"structure": ["wall_0", ...]``
+lists them. Like the ground they only ever support (``leans_on`` for an object
+leaning on a wall, ``attached`` for one fixed to it), are never placed and are
+not objects (``objects`` and ``order`` leave them out).
 """
 
 from __future__ import annotations
@@ -93,6 +99,8 @@ class SupportGraph:
         Name of the backend that produced the graph.
     meta
         Free-form extra data (parameters, per-object diagnostics).
+    structure
+        Ids of the wall and ceiling planes that are supporter nodes (like the ground; never targets).
     """
 
     objects: list[str]
@@ -101,6 +109,12 @@ class SupportGraph:
     dropped_edges: list[SupportEdge] = field(default_factory=list)
     backend: str = ""
     meta: dict = field(default_factory=dict)
+    structure: list[str] = field(default_factory=list)
+
+    @property
+    def fixed_nodes(self) -> set[str]:
+        """The nodes that only support: the ground and the structure planes."""
+        return {GROUND, *self.structure}
 
     def __post_init__(self) -> None:
         self.objects = [GROUND] + [o for o in self.objects if o != GROUND]
@@ -128,14 +142,14 @@ class SupportGraph:
         Parameters
         ----------
         include_ground
-            Keep the ground node and its edges (``False`` gives the paper's object-only graph ``G``).
+            Keep the ground and structure nodes and their edges (``False`` gives the paper's object-only graph ``G``).
         """
         import networkx as nx
 
         g = nx.DiGraph()
-        g.add_nodes_from(self.objects if include_ground else self.object_ids)
+        g.add_nodes_from([*self.objects, *self.structure] if include_ground else self.object_ids)
         for e in self.edges:
-            if include_ground or e.source != GROUND:
+            if include_ground or e.source not in self.fixed_nodes:
                 g.add_edge(e.source, e.target, relation=e.relation, confidence=e.confidence, reason=e.reason)
         return g
 
@@ -148,6 +162,8 @@ class SupportGraph:
         out = {"format": FORMAT, "backend": self.backend, "objects": list(self.objects),
                "edges": [e.to_dict() for e in self.edges], "order": list(self.order),
                "dropped_edges": [e.to_dict() for e in self.dropped_edges]}
+        if self.structure:
+            out["structure"] = list(self.structure)
         if self.meta:
             out["meta"] = self.meta
         return out
@@ -177,7 +193,8 @@ class SupportGraph:
         graph = cls(objects=list(data["objects"]), edges=[SupportEdge.from_dict(e) for e in data["edges"]],
                     order=list(data.get("order", [])),
                     dropped_edges=[SupportEdge.from_dict(e) for e in data.get("dropped_edges", [])],
-                    backend=data.get("backend", ""), meta=dict(data.get("meta", {})))
+                    backend=data.get("backend", ""), meta=dict(data.get("meta", {})),
+                    structure=list(data.get("structure", [])))
         check_graph(graph, path, scene_ids)
         return graph
 
@@ -187,13 +204,16 @@ def check_graph(graph: SupportGraph, path: str | Path | None = None,
     """Check node names, edges and order of ``graph``; raise :class:`InputError` naming file and field.
 
     Rejected: edges naming unknown nodes, self loops, duplicate ``(from, to)``
-    pairs, edges into the ground, an ``order`` that is not a permutation of the
-    objects, and (when ``scene_ids`` is given) objects missing from or extra to
-    the scene.
+    pairs, edges into the ground or a structure plane, structure ids that are
+    also objects, an ``order`` that is not a permutation of the objects, and
+    (when ``scene_ids`` is given) objects missing from or extra to the scene.
     """
     known = set(graph.objects)
     if len(known) != len(graph.objects):
         raise InputError(path, "objects", "duplicate object names")
+    planes = set(graph.structure)
+    if len(planes) != len(graph.structure) or planes & known:
+        raise InputError(path, "structure", f"duplicate or object-named plane ids {sorted(graph.structure)}")
     if scene_ids is not None:
         scene_set = set(scene_ids)
         if GROUND in scene_set:
@@ -204,6 +224,7 @@ def check_graph(graph: SupportGraph, path: str | Path | None = None,
             raise InputError(path, "objects", f"missing scene objects {missing}")
         if extra:
             raise InputError(path, "objects", f"objects not in the scene {extra}")
+    known |= planes
     for key, edges in (("edges", graph.edges), ("dropped_edges", graph.dropped_edges)):
         seen: set[tuple[str, str]] = set()
         for i, e in enumerate(edges):
@@ -212,8 +233,9 @@ def check_graph(graph: SupportGraph, path: str | Path | None = None,
                 raise InputError(path, f"{where}.from", f"unknown node {e.source!r}")
             if e.target not in known:
                 raise InputError(path, f"{where}.to", f"unknown node {e.target!r}")
-            if e.target == GROUND:
-                raise InputError(path, f"{where}.to", "the ground cannot be supported")
+            if e.target == GROUND or e.target in planes:
+                raise InputError(path, f"{where}.to", "the ground cannot be supported" if e.target == GROUND
+                                 else f"the plane {e.target!r} cannot be supported")
             if e.source == e.target:
                 raise InputError(path, where, f"self loop on {e.source!r}")
             if e.pair in seen:

@@ -16,7 +16,7 @@ from collections.abc import Callable, Hashable, Iterable, Sequence
 import numpy as np
 
 from phiscene.tolerances import TOL
-from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph
+from phiscene.topology.graph import SupportEdge, SupportGraph
 
 
 def footprint_area(mesh) -> float:
@@ -85,7 +85,7 @@ def break_cycles(edges: Sequence[SupportEdge]) -> tuple[list[SupportEdge], list[
     the edges sorted by name, so the result does not depend on input order),
     the cycle's edge with the lowest confidence is dropped; ties prefer a
     ``leans_on`` edge, then the lexicographically smallest ``(from, to)``.
-    Edges from the ground are never on a cycle (nothing points into the ground).
+    Edges from the ground or a wall are never on a cycle (nothing points into them).
 
     Returns
     -------
@@ -151,7 +151,7 @@ def placement_order(graph: SupportGraph, areas: dict[str, float]) -> list[str]:
     areas
         Footprint area per object id (see :func:`footprint_areas`).
     """
-    pairs = [e.pair for e in graph.edges if e.source != GROUND]
+    pairs = [e.pair for e in graph.edges if e.source not in graph.fixed_nodes]
     return kahn_order(graph.object_ids, pairs, footprint_key(areas))
 
 
@@ -182,6 +182,6 @@ def finalize(graph: SupportGraph, areas: dict[str, float] | None = None, scene=N
                 raise ValueError("finalize needs footprint areas, a scene or a key")
             areas = footprint_areas(scene)
         key = footprint_key(areas)
-    pairs = [e.pair for e in kept if e.source != GROUND]
+    pairs = [e.pair for e in kept if e.source not in graph.fixed_nodes]
     order = kahn_order(graph.object_ids, pairs, key)
     return graph.with_edges(kept, order=order, dropped_edges=list(graph.dropped_edges) + dropped)
