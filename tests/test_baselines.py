@@ -321,3 +321,20 @@ def test_import_bad_input(initial, tmp_path):
         import_external(tmp_path / "nothing", initial, tmp_path / "out" / "scene.json")
     with pytest.raises(ValueError, match="layout"):
         ImportParams.from_dict({"layout": "zip"})
+
+
+def test_single_parent_never_takes_a_wall():
+    """PAT3D-style lifting puts a child above its parent's top: a wall has no top, so a board leaning on a wall
+    and on a box gets the box, and one leaning on the wall alone rests on the ground."""
+    from phiscene.baselines.lift import depth_order, single_parent
+    from phiscene.topology.graph import SupportEdge, SupportGraph
+
+    graph = SupportGraph(objects=["box", "board", "plank"],
+                         edges=[SupportEdge("ground", "box", "supports", 1.0, ""),
+                                SupportEdge("wall_0", "board", "leans_on", 1.0, ""),
+                                SupportEdge("box", "board", "leans_on", 0.9, ""),
+                                SupportEdge("wall_0", "plank", "leans_on", 1.0, "")],
+                         order=["box", "board", "plank"], structure=["wall_0"])
+    parents = single_parent(graph)
+    assert parents == {"box": "ground", "board": "box", "plank": "ground"}
+    assert dict(depth_order(parents)) == {"box": 1, "plank": 1, "board": 2}

@@ -130,3 +130,30 @@ def test_clean_stays_the_default_and_its_record_unchanged(boxes):
     assert [o.mesh_path for o in out.objects] == [o.mesh_path for o in boxes["gt"].objects]
     with pytest.raises(ValueError, match="degradation kind"):
         DegradeParams.from_dict({"kind": "sam3d"})
+
+
+def test_workflow_gives_the_gt_row_its_own_proxies_only_on_reconstructed_suites(tmp_path):
+    """On a `foundation` suite the initial meshes are not the GT's: the gt row's simulated metrics need proxies of
+    the GT meshes (rule gt_proxies); on a `clean` suite they share the scene's proxies."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import yaml
+
+    root = Path(__file__).resolve().parents[1]
+
+    def dry(kind):
+        cfg = tmp_path / f"{kind}.yaml"
+        suite = {"n_scenes": 1, "benchmark": {"degrade": {"kind": kind}}}
+        cfg.write_text(yaml.safe_dump({"suites": {"contact": suite}}))
+        cmd = [sys.executable, "-m", "snakemake", "-s", str(root / "Snakefile"), "--directory", str(tmp_path / kind),
+               "-n", "-j1", "--configfile", str(cfg), "--", "results/tables/phys.csv"]
+        res = subprocess.run(cmd, cwd=root, env={**os.environ, "PYTHONHASHSEED": "0"}, capture_output=True,
+                             text=True, timeout=300)
+        assert res.returncode == 0, res.stderr[-3000:]
+        return res.stdout + res.stderr
+
+    assert "results/proxies/contact/scene_000.gt.npz" in dry("foundation")
+    assert ".gt.npz" not in dry("clean")

@@ -31,7 +31,7 @@ rule gt_proxies:
     output:
         "results/proxies/{suite}/{scene}.gt.npz",
     params:
-        proxies=suite_proxies,
+        proxies=config["proxies"],  # the settings the benchmark verified its ground truth with (cache hits)
         cache_dir=CACHE,
         version=V.PROXIES,
     log:

@@ -64,6 +64,9 @@ class LiftParams(Params):
 def single_parent(graph: SupportGraph) -> dict[str, str]:
     """One parent per object: the most confident supporter, ties by edge order; ``ground`` if none.
 
+    A wall or ceiling (a ``structure`` node) is never a parent: nothing is lifted above a wall, so an object
+    leaning on one or fixed to one counts as resting on the ground unless an object supports it.
+
     Parameters
     ----------
     graph
@@ -74,7 +77,10 @@ def single_parent(graph: SupportGraph) -> dict[str, str]:
     ``{object id: parent id or "ground"}`` for every object of the graph, in graph order.
     """
     best: dict[str, tuple[float, str]] = {}
+    walls = set(graph.structure)
     for e in graph.edges:
+        if e.source in walls:
+            continue
         if e.target not in best or e.confidence > best[e.target][0]:
             best[e.target] = (e.confidence, e.source)
     return {oid: best[oid][1] if oid in best else GROUND for oid in graph.object_ids}
