@@ -183,3 +183,19 @@ def test_pose_metrics_gt_add_s(work):
     m = pose_metrics(shifted, gt, gt=gt)
     assert m["gt_translation_max"] == pytest.approx(0.03, abs=1e-9)
     assert 0.0 < m["gt_adds_mean"] <= 0.03 + 1e-9  # symmetric distance never exceeds the shift
+
+
+def test_lowering_onto_a_supporter_that_is_not_beneath_stops_at_the_ground(tmp_path):
+    """A carried object whose supporter moved away is lowered until the ground stops it, never through it."""
+    from phiscene.assembly.assemble import _lowered
+    from phiscene.sim.bullet import BulletWorld
+
+    box = trimesh.creation.box((0.1, 0.1, 0.1))
+    hulls = [np.asarray(box.vertices)]
+    with BulletWorld(SIM, tmp_path) as world:
+        world.add_ground(0.0)
+        world.add_body("table", hulls, make_pose(translation=(1.0, 0.0, 0.05)), None)  # 1 m to the side
+        world.add_body("cup", hulls, make_pose(translation=(0.0, 0.0, 0.6)), None)
+        out = _lowered(world, "cup", make_pose(translation=(0.0, 0.0, 0.6)), ["table"], 0.002)
+    bottom = out[2, 3] - 0.05
+    assert 0.0 <= bottom <= 0.002 + 1e-9

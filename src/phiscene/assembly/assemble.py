@@ -445,14 +445,17 @@ def _verify(world, oid: str, sp: SettleParams) -> bool:
 
 
 def _lowered(world, oid: str, pose: np.ndarray, below: list[str], clearance: float) -> np.ndarray:
-    """``pose`` moved straight down until within ``clearance`` of the nearest of ``below``.
+    """``pose`` moved straight down until within ``clearance`` of the nearest of ``below`` (or of the ground).
 
-    Each step lowers by the Euclidean gap (a lower bound of the vertical gap), so it never penetrates.
+    Each step lowers by the Euclidean gap (a lower bound of the vertical gap), so it never penetrates. The ground
+    always stops it: a supporter that is no longer beneath the object (it moved, or the graph was wrong) must not
+    let it sink through the floor.
     """
+    stoppers = list(dict.fromkeys([*below, *(["ground"] if "ground" in world.bodies else [])]))
     out = pose.copy()
     for _ in range(8):
         world.set_pose(oid, out)
-        gaps = world.distances(oid, below, 1.0)
+        gaps = world.distances(oid, stoppers, 1.0)
         gap = min(gaps.values()) if gaps else 0.0
         if gap <= clearance:
             break
