@@ -17,6 +17,10 @@ min_version("9.0")
 configfile: os.path.join(workflow.basedir, "config/config.yaml")
 
 
+# An override file drops a table with `tables: {<name>: null}` (--configfile merges mappings, it cannot delete).
+config["tables"] = {name: spec for name, spec in (config.get("tables") or {}).items() if spec is not None}
+
+
 # Every parameter class on its section first (phiscene.config): a misspelled key fails here in one line naming
 # its config path, before any job runs; then the schema checks types and ranges. Jobs that re-read this file
 # (cluster executors) skip the class check: the main process has made it (it imports the stages, ~0.7 s).

@@ -163,7 +163,8 @@ def test_report_opens_in_chromium(tmp_path):
                        "topology": {"suite": "contact", "backends": ["geometric"]},
                        "crosssim": {"suite": "contact", "methods": ["initial", "phi_scene"]},
                        "recon": {"suite": "contact", "methods": ["initial", "phi_scene"]},
-                       "ablation": {"suite": "contact", "methods": ["initial", "phi_scene"]}},
+                       "ablation": {"suite": "contact", "methods": ["initial", "phi_scene"]},
+                       **{f"{t}_clutter": None for t in ("phys", "crosssim", "topology", "recon", "ablation")}},
             "export": {"report_demos": 0}, "report": {"method": "phi_scene", "scaling": []}}
     (tmp_path / "tiny.yaml").write_text(yaml.safe_dump(tiny))
     base = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "--directory", str(tmp_path)]
@@ -184,7 +185,7 @@ def test_report_opens_in_chromium(tmp_path):
     # the front page (rendered by the report's JavaScript) shows every table, with the CSV's values
     from phiscene.table_registry import kind_of
 
-    shown = [t for t, spec in tiny["tables"].items() if kind_of(t, spec).report] + ["runtime"]
+    shown = [t for t, spec in tiny["tables"].items() if spec and kind_of(t, spec).report] + ["runtime"]
     assert dom.count('class="phiscene-table"') == len(shown)
     start = dom.index('id="table-phys"')
     cells = _parse(dom[start:dom.index("</table>", start) + len("</table>")])
