@@ -58,11 +58,15 @@ def test_deep_merge_merges_every_level_and_copies():
 
 
 def _shifted(section: dict) -> dict:
-    """Every number of a config section changed (ints + 1, floats halved), so no value equals a dataclass default."""
+    """Every number and choice of a config section changed (ints + 1, floats halved, choices swapped), so no value
+    equals a dataclass default."""
+    swap = {"adam": "steepest"}
     out = {}
     for key, value in section.items():
         if isinstance(value, dict):
             out[key] = _shifted(value)
+        elif isinstance(value, str) and value in swap:
+            out[key] = swap[value]
         elif isinstance(value, bool) or not isinstance(value, (int, float)):
             out[key] = value
         else:

@@ -17,7 +17,7 @@ from scenes import box_scene, convex_proxies
 from scipy.spatial.transform import Rotation
 
 from phiscene.assembly import AssemblyParams, ground_scene
-from phiscene.assembly.faithful import flush_pose, resting_normals
+from phiscene.assembly.faithful import carried, flush_pose, resting_candidates, resting_normals
 from phiscene.meshes import save_mesh
 from phiscene.metrics.pose import pose_metrics
 from phiscene.sim.settings import SimSettings
@@ -142,6 +142,83 @@ def test_flush_pose_is_the_smallest_rotation():
     assert math.degrees(math.atan2(Ro[1, 0], Ro[0, 0])) == pytest.approx(30.0, abs=1e-6)
     same, a = flush_pose(pose, normals, np.zeros(3), np.array([0.0, 0.0, 1.0]), 5.0)
     assert a == 0.0 and np.array_equal(same, pose)
+
+
+def test_resting_candidates_are_every_facet_within_the_angle_nearest_first():
+    # a 1 x 2 x 3 box tilted 30 deg about x rests on its -z face (30 deg away) or its -y face (60 deg away)
+    normals = resting_normals(trimesh.creation.box((1.0, 2.0, 3.0)).vertices)
+    pose = make_pose(Rotation.from_euler("x", 30, degrees=True).as_matrix(), (0.0, 0.0, 1.0))
+    up = np.array([0.0, 0.0, 1.0])
+    found = resting_candidates(pose, normals, np.zeros(3), up, 70.0)
+    assert [round(a, 6) for _, a in found] == [30.0, 60.0]
+    for out, _ in found:
+        R, t, _ = decompose(out)
+        assert min(abs(abs(R[2, k]) - 1.0) for k in range(3)) < 1e-9  # a face is level
+        assert np.allclose(t, pose[:3, 3])
+    assert len(resting_candidates(pose, normals, np.zeros(3), up, 45.0)) == 1
+
+
+def test_carried_follows_the_supporter_point_beneath_without_turning():
+    # the supporter turns 90 deg about z around its centre (0, 0, 0.5) and moves 0.1 m along x;
+    # the object's centre of mass sits 0.2 m along x from that centre
+    before = make_pose(translation=(0.0, 0.0, 0.5))
+    after = make_pose(Rotation.from_euler("z", 90, degrees=True).as_matrix(), (0.1, 0.0, 0.5))
+    R = Rotation.from_euler("y", 5, degrees=True).as_matrix()
+    pose = make_pose(R, (0.2, 0.0, 1.0))
+    out = carried(pose, np.zeros(3), before, after)
+    assert np.allclose(out[:3, 3], (0.1, 0.2, 1.0))  # (0.2, 0, 0.5) turned to (0, 0.2, 0.5), then + (0.1, 0, 0)
+    assert np.allclose(out[:3, :3], R)
+
+
+@pytest.mark.parametrize("inside, holds", [(0.03, True), (0.001, False)])
+def test_tilt_test_tells_a_resting_box_from_one_balanced_on_the_edge(tmp_path, inside, holds):
+    """Statics: a box resting on a table edge stays under gravity tilted by d when its centre of mass is more
+    than h tan d inside the edge (h = 0.1 m, d = 4 deg: 7 mm, less Bullet's rolling friction of 3 mm); at 1 mm
+    inside it has settled too, but tips."""
+    from phiscene.assembly.settle import SettleParams, holds_when_tilted, settle_object
+    from phiscene.inertia import rigid_props
+    from phiscene.sim.bullet import BulletWorld
+
+    box = trimesh.creation.box((0.1, 0.1, 0.2))
+    table = trimesh.creation.box((0.4, 0.4, 0.1))
+    with BulletWorld(SIM, tmp_path) as world:
+        world.add_ground(0.0)
+        world.add_body("table", [np.asarray(table.vertices)], make_pose(translation=(0, 0, 0.05)), None)
+        world.set_static("table")
+        hulls = [np.asarray(box.vertices)]
+        world.add_body("box", hulls, make_pose(translation=(0.2 - inside, 0, 0.2005)),
+                       rigid_props(box, hulls, SIM.density, 1.0))
+        assert settle_object(world, "box", SettleParams()).settled
+        before = world.pose("box")
+        assert holds_when_tilted(world, "box", 4.0, 60, 0.005, 1.0) is holds
+        assert np.allclose(world.pose("box"), before)  # put back
+
+
+@pytest.mark.parametrize("optimizer", ["adam", "steepest"])
+def test_penetration_solve_pushes_along_the_normal_with_steepest(tmp_path, optimizer):
+    """A cube sunk 2 cm into a tilted wall: the smallest translation clearing it is (2 cm + eps) along the normal."""
+    from phiscene.assembly.penetration import PenetrationParams, resolve_penetration, sdf_body
+    from phiscene.scene import Plane
+
+    n = np.array([0.6, 0.0, 0.8])
+    cube = trimesh.creation.box((0.1, 0.1, 0.1))
+    pp = PenetrationParams(optimizer=optimizer)
+    # the corner of the cube nearest the plane reaches 2 cm past it
+    depth = 0.02
+    reach = 0.05 * np.abs(n).sum()
+    pose = make_pose(translation=n * (reach - depth))
+    active = sdf_body("cube", cube, pose, pp.n_active, pp, tmp_path)
+    x, info = resolve_penetration(active, [], None, pp, [Plane("wall_0", "wall", tuple(n), 0.0)])
+    assert info["final_loss"] == 0.0
+    along = float(x @ n)
+    sideways = float(np.linalg.norm(x - along * n))
+    assert depth <= along <= depth + pp.eps + 2 * pp.lr
+    if optimizer == "steepest":
+        assert sideways < 1e-6  # every point's gradient is the normal: no sideways push
+    else:
+        # Adam normalises each coordinate: equal steps along x and z, (1, 0, 1) s with 1.4 s = along,
+        # whose part off the normal is 0.14 of the push
+        assert sideways == pytest.approx(along / 1.4 * math.hypot(1 - 0.6 * 1.4, 1 - 0.8 * 1.4), rel=0.05)
 
 
 # -- pose metrics -------------------------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""Ground a scene.json with phi_scene_faithful and phi_scene (the paper's loop); pose + physical metrics (dev comparison).
+"""Ground a scene.json with phi_scene (faithful) and phi_scene_paper (the paper's loop); pose + physical metrics.
 
 usage: python benchmarks/faithful/compare.py SCENE_JSON [proxy_backend|convex] [GT_SCENE_JSON|-] [TOPOLOGY_JSON]
 Environment: FAITHFUL='{"max_flush_angle": 10}' overrides assembly.faithful keys. Logs go to /tmp/faithful_viga/.
@@ -14,6 +14,7 @@ import yaml
 torch.set_num_threads(1)
 from phiscene import topology
 from phiscene.assembly import AssemblyParams, ground_scene
+from phiscene.config import method_assembly
 from phiscene.metrics.drift import drift_mujoco
 from phiscene.metrics.physical import PhysicalParams, physical_metrics
 from phiscene.metrics.pose import pose_metrics
@@ -26,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[2]
 cfg = yaml.safe_load(open(ROOT / "config/config.yaml"))
 import os
 
-cfg["assembly"]["faithful"].update(json.loads(os.environ.get("FAITHFUL", "{}")))
+cfg["methods"]["phi_scene"]["assembly"]["faithful"].update(json.loads(os.environ.get("FAITHFUL", "{}")))
 path = Path(sys.argv[1]); backend = sys.argv[2] if len(sys.argv) > 2 else "convex"
 gt = load_scene(sys.argv[3]) if len(sys.argv) > 3 and sys.argv[3] != "-" else None
 scene = load_scene(path)
@@ -61,8 +62,8 @@ def show(name, s, secs, rec=None):
               rec["objects"][k].get("certificate", {}).get("remedy")) for k, v in worst], flush=True)
     print(name, json.dumps({k: (round(v, 3) if isinstance(v, float) else v) for k, v in r.items()}), flush=True)
 show("initial", scene, 0.0)
-for name, over in (("phi_scene_faithful", {"faithful": {"enabled": True}}), ("phi_scene", {"faithful": {"enabled": False}})):
-    params = AssemblyParams.from_dict({**cfg["assembly"], **over})
+for name in ("phi_scene", "phi_scene_paper"):
+    params = AssemblyParams.from_dict(method_assembly(cfg, name))
     ground_scene(scene, graph.order, proxies, params, sim, cache, graph=graph)  # warm
     t = time.perf_counter()
     s, rec = ground_scene(scene, graph.order, proxies, params, sim, cache, graph=graph)

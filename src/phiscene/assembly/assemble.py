@@ -23,7 +23,7 @@ import numpy as np
 from phiscene.assembly import faithful as fa
 from phiscene.assembly.faithful import FaithfulParams
 from phiscene.assembly.penetration import PenetrationParams, SdfBody, resolve_penetration, sdf_body
-from phiscene.assembly.settle import SettleParams, settle_object, window_motion
+from phiscene.assembly.settle import SettleParams, holds_when_tilted, settle_object, window_motion
 from phiscene.errors import InputError
 from phiscene.params import Params
 from phiscene.proxies import Proxy, check_proxies
@@ -160,6 +160,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     poses: dict[str, np.ndarray] = {}
     placed: list[SdfBody] = []
     objects: dict[str, dict] = {}
+    coms: dict[str, np.ndarray] = {}  # faithful: centre of mass per object, local frame
     world_cm = BulletWorld(sim, cache_dir) if params.settle else contextlib.nullcontext()
     with world_cm as world:
         if params.settle:
@@ -188,8 +189,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                 info = _faithful_info(scene, oid, obj, proxies.get(oid), graph, poses)
                 carrier = next((q for q in info["below"] if q in poses), None)
                 if fp.carry and carrier is not None:
-                    # supported objects move with their supporter: the input arrangement on it is kept
-                    pose = poses[carrier] @ np.linalg.inv(np.asarray(scene.get(carrier).pose, float)) @ pose
+                    pose = fa.carried(pose, info["com"], np.asarray(scene.get(carrier).pose, float), poses[carrier])
                     rec["carried_by"] = carrier
                 if fp.flush and info["flushable"]:
                     pose, info["flush_angle"] = fa.flush_pose(pose, info["normals"], info["com"],
@@ -226,6 +226,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             rec.update(displacement=_round(total), rotation_change=_round(turned))
             if info is not None:
                 moved = float(np.linalg.norm(fa.com_world(pose, info["com"]) - fa.com_world(initial, info["com"])))
+                coms[oid] = info["com"]
                 rec["certificate"] = fa.certificate(
                     rec["settled"], rec["settle_remedy"] or "none", info["below"], info["leaning"],
                     rec.get("touching", []),
@@ -234,12 +235,13 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             objects[oid] = rec
             if progress is not None:
                 progress(_progress_line(index, len(order), oid, rec))
+    if params.faithful.enabled and params.settle and params.faithful.joint_settle_frames > 0:
+        poses = _joint_settle(_with_attached(scene.with_poses(poses), attached), proxies, sim, cache_dir,
+                              params.faithful, params.settle_params, objects, coms,
+                              {o: np.asarray(scene.get(o).pose, float) for o in order})
     if params.faithful.enabled and params.settle and params.faithful.joint_frames > 0:
-        grounded = scene.with_poses(poses)
-        for o in grounded.objects:
-            if o.id in attached:
-                o.attached = attached[o.id]
-        _joint_check(grounded, proxies, sim, cache_dir, params.faithful, objects)
+        _joint_check(_with_attached(scene.with_poses(poses), attached), proxies, sim, cache_dir, params.faithful,
+                     objects)
     unsettled = [o for o, r in objects.items() if r["settled"] is False]
     summary = {"objects": len(order), "settled": sum(r["settled"] is True for r in objects.values()),
                "unsettled": unsettled,
@@ -256,11 +258,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     summary["attached"] = sorted(attached)
     record = {"format": LOG_FORMAT, "order": order, "appended": appended, "params": params.to_dict(),
               "sim": sim.to_dict(), "objects": objects, "summary": summary}
-    out = scene.with_poses(poses)
-    for o in out.objects:
-        if o.id in attached:
-            o.attached = attached[o.id]
-    return out, record
+    return _with_attached(scene.with_poses(poses), attached), record
 
 
 def _fix(world, oid: str, mesh, proxy: Proxy | None, pose: np.ndarray, sim: SimSettings, rec: dict) -> None:
@@ -353,95 +351,83 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
 
 def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: SimSettings, sp: SettleParams,
                      fp: FaithfulParams, info: dict, rec: dict) -> np.ndarray:
-    """Guarded settling (see :mod:`phiscene.assembly.faithful`); fills ``rec``; returns the frozen pose."""
+    """Guarded settling (see :mod:`phiscene.assembly.faithful`); fills ``rec``; returns the frozen pose.
+
+    Every start (the corrected pose, then the nearest resting poses, then a damped run) is lowered onto what
+    lies beneath and settled with the paper's settling; the first result within the slide/turn bounds that
+    keeps the graph's supporters is taken, else the closest settled one. The final pose is always the outcome
+    of free settling, so it is as stable as the paper's.
+    """
     from phiscene.inertia import rigid_props
 
     props = rigid_props(mesh, proxy.hulls, sim.density, decompose(pose)[2])
     world.add_body(oid, proxy.hulls, pose, props)
-    pose = _lowered(world, oid, pose, [p for p in info["below"] if p in world.bodies], fp.contact_tol / 2)
-    world.set_pose(oid, pose)
+    context = [b for b in world.bodies if b != oid]
 
     def touching() -> list[str]:
-        near = world.distances(oid, [p for p in world.bodies if p != oid], fp.contact_tol)
-        return sorted(near)
+        return sorted(world.distances(oid, context, fp.contact_tol))
 
-    loose: list[tuple[float, np.ndarray]] = []  # settled results kept on their supporters within max_roll
+    tried: list[dict] = []
 
-    def accept(result_pose, start=None, settled_now=False) -> tuple[bool, str]:
-        ok, moved, turned = fa.within_bounds(pose if start is None else start, result_pose, info["com"],
-                                             info["diag"], fp)
+    def attempt(label: str, start: np.ndarray, damped: bool = False) -> dict:
+        start = _lowered(world, oid, start, context, fp.contact_tol / 2)
+        world.set_pose(oid, start)
+        frames = 0
+        if damped:
+            world.set_dynamics(oid, linearDamping=fp.retry_damping, angularDamping=fp.retry_damping,
+                               rollingFriction=fp.retry_rolling_friction, spinningFriction=fp.retry_rolling_friction)
+            first = settle_object(world, oid, sp)
+            world.restore_dynamics(oid)
+            frames += first.frames
+            world.set_pose(oid, first.pose)  # at rest; then normal settings decide whether it stays
+        result = settle_object(world, oid, sp)
+        frames += result.frames
+        ok, moved, turned = fa.within_bounds(pose, result.pose, info["com"], info["diag"], fp)
         lost = fa.lost_supporters(info["below"], info["leaning"], touching())
-        shift = float(np.linalg.norm((fa.com_world(result_pose, info["com"]) - fa.com_world(pose, info["com"]))[:2]))
-        if settled_now and not lost and shift <= fp.max_roll:
-            loose.append((shift, result_pose))
-        if not ok:
-            return False, f"settling moved it {moved:.3f} m / {turned:.1f} deg"
-        if lost:
-            return False, f"settling lost supporters {lost}"
-        return True, ""
+        near = touching()
+        robust = True
+        if result.settled and fp.tilt_test > 0 and not info["leaning"]:  # leaning: held by friction, not balance
+            robust = holds_when_tilted(world, oid, fp.tilt_test, fp.tilt_frames, fp.joint_tol, fp.joint_tol_deg)
+            frames += 4 * fp.tilt_frames
+        whys = ["" if ok else f"moved {moved:.3f} m / {turned:.1f} deg",
+                f"lost supporters {lost}" if lost else "", "" if result.settled else "not settled",
+                "" if robust else f"marginal: tips when tilted {fp.tilt_test:g} deg"]
+        out = {"label": label, "result": result, "frames": frames,
+               "ok": ok and not lost and result.settled and robust, "lost": bool(lost), "robust": robust,
+               "cost": fa.closeness(pose, result.pose, info["com"], info["diag"]),
+               "why": "; ".join(w for w in whys if w), "touching": near}
+        tried.append(out)
+        return out
 
-    result = settle_object(world, oid, sp)
-    frames, remedy, reason = result.frames, result.remedy, ""
-    ok, why = accept(result.pose, settled_now=result.settled)
-    settled = result.settled
+    best = attempt("none", pose)
+    if not best["ok"]:
+        starts = fa.resting_candidates(pose, info["normals"], info["com"], info["up"], fp.max_stable_angle)
+        for start, angle in [c for c in starts if c[1] > 0.5][: fp.max_candidates]:
+            if attempt(f"stable {angle:.1f} deg", start)["ok"]:
+                break
+        if not any(t["ok"] for t in tried):
+            attempt("damped", pose, damped=True)
+    ok = [t for t in tried if t["ok"]]
+    # else: a settled result first, then one that holds when tilted, then one that kept its supporters, then the
+    # closest to the corrected input
+    best = ok[0] if ok else min(tried, key=lambda t: (not t["result"].settled, not t["robust"], t["lost"], t["cost"]))
+    result = best["result"]
+    if not best["ok"]:
+        remedy = "closest"
+    else:
+        remedy = result.remedy if best["label"] == "none" else best["label"].split()[0]
+    reason = "; ".join(f"{t['label']}: {t['why']}" for t in tried if t is not best or not best["ok"])
     final = result.pose
-    if not ok:
-        reason = why
-        # remedy "stable": the nearest stable resting pose within max_stable_angle, lowered, settled normally
-        start, angle = fa.flush_pose(pose, info["normals"], info["com"], info["up"], fp.max_stable_angle)
-        if angle > 0:
-            start = _lowered(world, oid, start, [p for p in info["below"] if p in world.bodies], fp.contact_tol / 2)
-            world.set_pose(oid, start)
-            stable = settle_object(world, oid, sp)
-            frames += stable.frames
-            ok, why = accept(stable.pose, start, settled_now=stable.settled)
-            if ok and stable.settled:
-                final, remedy, settled = stable.pose, "stable", True
-            else:
-                reason += f"; stable pose {angle:.1f} deg away: {why or 'not settled'}"
-                ok = False
-    if not ok and loose:
-        # remedy "rolled": the settled result closest to the input among those that stayed on their supporters
-        final = min(loose, key=lambda c: c[0])[1]
-        remedy, settled, ok = "rolled", True, True
-        world.set_pose(oid, final)
-    if not ok:
-        world.set_pose(oid, pose)
-        world.set_dynamics(oid, linearDamping=fp.retry_damping, angularDamping=fp.retry_damping,
-                           rollingFriction=fp.retry_rolling_friction, spinningFriction=fp.retry_rolling_friction)
-        damped = settle_object(world, oid, sp)
-        world.restore_dynamics(oid)
-        frames += damped.frames
-        ok, why = accept(damped.pose)
-        if ok:
-            final, remedy = damped.pose, "damped"
-            settled = _verify(world, oid, sp)
-            frames += sp.window
-            world.set_pose(oid, final)
-        else:
-            reason += f"; damped retry: {why}"
-            final, remedy = pose, "held"
-            world.set_pose(oid, final)
-            settled = _verify(world, oid, sp)
-            frames += sp.window
-            world.set_pose(oid, final)
-    rec["touching"] = touching()
+    world.set_pose(oid, final)
+    rec["touching"] = best["touching"]
     world.set_static(oid)
     moved, turned = window_motion(pose, final)
-    rec.update(settle_frames=frames, settled=settled, settle_remedy=remedy,
+    rec.update(settle_frames=sum(t["frames"] for t in tried), settled=result.settled, settle_remedy=remedy,
                residual_translation=_round(result.residual_translation, 12),
                residual_rotation=_round(result.residual_rotation, 12),
-               settle_translation=_round(moved), settle_rotation=_round(turned), reason=reason)
+               settle_translation=_round(moved), settle_rotation=_round(turned), reason=reason,
+               attempts=len(tried))
     return final
-
-
-def _verify(world, oid: str, sp: SettleParams) -> bool:
-    """One settling window at normal settings from the current pose (velocity zeroed): criterion met?"""
-    start = world.pose(oid)
-    world.set_pose(oid, start)
-    world.step_frames(sp.window)
-    dt, dr = window_motion(start, world.pose(oid))
-    return dt < sp.eps_pos and dr < sp.eps_rot
 
 
 def _lowered(world, oid: str, pose: np.ndarray, below: list[str], clearance: float) -> np.ndarray:
@@ -461,6 +447,50 @@ def _lowered(world, oid: str, pose: np.ndarray, below: list[str], clearance: flo
             break
         out[2, 3] -= gap - clearance / 2
     return out
+
+
+def _with_attached(scene: Scene, attached: dict[str, str]) -> Scene:
+    """``scene`` with the attachments of ``attached`` (id -> what holds it) set on its objects."""
+    for o in scene.objects:
+        if o.id in attached:
+            o.attached = attached[o.id]
+    return scene
+
+
+def _joint_settle(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, cache_dir: Path, fp: FaithfulParams,
+                  sp: SettleParams, objects: dict[str, dict], coms: dict[str, np.ndarray],
+                  inputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Release the sequentially grounded scene as a whole until every object is at rest; the poses it ends at.
+
+    Sequential settling tests each object against a frozen context: a supporter is never tested under the load
+    of what was placed on it later (a book that tips under the box put on its edge). One joint simulation
+    (:func:`~phiscene.baselines.joint_sim.joint_sim`, attached objects static) ends that: objects that were
+    at rest do not move, the others find the rest their neighbours allow. Each moved object's record gets
+    ``joint_settle`` ([m, deg]) and its displacement and rotation change from ``inputs`` (id -> input pose
+    (4, 4)) are updated, certificate included (its centre-of-mass displacement with ``coms``: id -> (3,) local).
+    """
+    from phiscene.baselines.joint_sim import JointSimParams, joint_sim
+
+    params = JointSimParams(window=sp.window, eps_pos=sp.eps_pos, eps_rot=sp.eps_rot,
+                            max_frames=fp.joint_settle_frames)
+    settled, log_ = joint_sim(scene, proxies, sim, params, cache_dir)
+    poses = {o.id: np.asarray(o.pose, dtype=float) for o in settled.objects}
+    for oid, entry in log_["objects"].items():
+        rec = objects[oid]
+        rec["joint_settle"] = [_round(entry["displacement"]), _round(np.degrees(entry["rotation_change"]), 6)]
+        total, turned = window_motion(inputs[oid], poses[oid])
+        rec.update(displacement=_round(total), rotation_change=_round(turned))
+        cert = rec.get("certificate")
+        if cert is not None:
+            com = coms[oid]
+            cert["displacement"] = _round(float(np.linalg.norm(fa.com_world(poses[oid], com)
+                                                               - fa.com_world(inputs[oid], com))))
+            cert["rotation_change"] = _round(np.degrees(turned), 6)
+            if entry["displacement"] > fp.joint_tol or np.degrees(entry["rotation_change"]) > fp.joint_tol_deg:
+                cert["remedy"] = f"{cert['remedy']}+joint"
+    log.info("joint settling: %d frames, %s", log_["frames"],
+             "all at rest" if log_["all_settled"] else f"not at rest: {', '.join(log_['unsettled'])}")
+    return poses
 
 
 def _joint_check(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, cache_dir: Path, fp: FaithfulParams,

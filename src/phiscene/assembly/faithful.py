@@ -2,7 +2,7 @@
 
 The paper's loop (translation-only SDF, free settling, freeze) lets the simulator
 take an object wherever it goes: a slightly tilted block slides off its parent,
-a fruit rolls off the table. The faithful variant adds three things around the
+a fruit rolls off the table. The faithful variant adds these around the
 same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
 
 1. **Flush correction** before the SDF stage. The stable resting poses of the
@@ -14,22 +14,33 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    most ``max_flush_angle``. Small orientation errors are corrected, large
    ones (a plank leaning on purpose) are left alone. Objects with a
    ``leans_on`` parent are never flushed.
-2. **Carried and lowered**. An object supported from below first moves
-   with its supporter (``carry``: the supporter's change of pose is applied
-   to it), then is lowered straight down onto its supporters (no free fall).
-3. **Guarded settling**. After the paper's settling the result is rejected
-   when the centre of mass moved (horizontally) farther than the bound (``max_slide`` or
-   ``max_slide_frac`` of the object's bounding-box diagonal, the smaller),
-   turned more than ``max_turn``, or lost contact with a supporter the graph
-   names. A rejected object is restarted from its nearest stable resting
-   pose within ``max_stable_angle`` (``stable``, accepted only if it settles
-   within the bounds); else the settled result of either that kept its
-   supporters and rolled at most ``max_roll`` (``rolled``); else reset to its corrected pose and settled again
-   with high damping and rolling friction (``damped``); if that is rejected
-   too it is frozen at its corrected pose lowered onto its supporters
-   (``held``), whose static equilibrium is then tested with one settling
-   window at normal settings (the certificate's ``settled``).
-4. **A certificate** per object in the assembly log (:func:`certificate`), with the result of releasing
+2. **Carried**. An object supported from below first moves with its
+   supporter (``carry``, :func:`carried`): it is translated as the point of
+   the supporter under its centre of mass moved, so it stays over the same
+   spot of its supporter; it is not turned with it (a supporter that toppled
+   would tip it over too; the flush correction sets its orientation).
+3. **Guarded settling**. Each start is lowered straight down until it
+   touches whatever lies beneath (never through it), then settled with the
+   paper's settling. A result is accepted when it met the settling criterion,
+   stays when gravity tilts by ``tilt_test`` degrees (no balancing on an edge),
+   its centre of mass moved (horizontally) at most the bound (``max_slide`` or
+   ``max_slide_frac`` of the bounding-box diagonal, the smaller), it turned at
+   most ``max_turn`` and it still touches a supporter the graph names. The
+   starts, in order: the corrected pose (remedy ``none``, or the paper's
+   ``extra_frames`` / ``damping``); the object's other resting poses within
+   ``max_stable_angle``, nearest first, at most ``max_candidates`` of them
+   (``stable``); a run with high damping and rolling friction whose resting
+   pose is then settled again at normal settings (``damped``). When none is
+   accepted, the result closest to the corrected input (:func:`closeness`)
+   among the settled ones that kept their supporters is taken (``closest``),
+   with the reasons in the certificate. The final pose is always the outcome
+   of free settling at normal settings: the object is never frozen where the
+   simulator would not leave it.
+4. **Joint settling**. The sequentially grounded scene is released as a
+   whole until every object is at rest (``joint_settle_frames``): a
+   supporter is never tested under the load put on it later in the order.
+   Objects at rest do not move; the log says how far the others went.
+5. **A certificate** per object in the assembly log (:func:`certificate`), with the result of releasing
    the whole grounded scene at once (``joint_stable``; sequential settling only tests an object against a
    frozen context).
 """
@@ -67,19 +78,28 @@ class FaithfulParams(Params):
     max_turn
         Largest rotation accepted from settling (deg).
     carry
-        Move each object with its (first placed) supporter from below: the supporter's change of pose from
-        its input is applied to the object's input pose first.
+        Move each object with its (first placed) supporter from below (:func:`carried`).
+    joint_settle_frames
+        After the loop the whole scene is simulated together until every object is at rest, at most this many
+        frames (0 = off): a supporter is then tested under the load placed on it later.
     joint_frames
-        After the loop the whole scene is released for this many frames (0 = no check); each certificate gets
+        After that the whole scene is released for this many frames (0 = no check); each certificate gets
         ``joint_drift`` and ``joint_stable``.
     joint_tol, joint_tol_deg
         ``joint_stable``: the object moved at most this far (m) and turned at most this much (deg).
     max_stable_angle
-        Remedy ``stable``: a rejected object is restarted from its nearest stable resting pose when that is
-        within this angle (deg) of its pose.
-    max_roll
-        Remedy ``rolled``: when both fail, the settled result (of either) that kept its supporters and whose
-        centre of mass moved at most this far horizontally (m) is taken, the closest to the input.
+        Remedy ``stable``: a rejected object is restarted from its resting poses within this angle (deg) of
+        its pose, nearest first.
+    max_candidates
+        At most this many resting poses are tried.
+    tilt_test
+        A settled result is accepted only if it stays (within ``joint_tol`` / ``joint_tol_deg``) when gravity
+        tilts by this many degrees in each horizontal direction
+        (:func:`~phiscene.assembly.settle.holds_when_tilted`): an object balanced on an edge stops moving too,
+        and topples when the whole scene is released. 0 = off. Not for objects that lean on something: friction
+        at two contacts holds them, and a tilt tests that margin rather than their balance.
+    tilt_frames
+        Frames simulated per tilt direction.
     contact_tol
         A supporter counts as kept when the object is within this distance of it at rest (m).
     retry_damping
@@ -97,19 +117,23 @@ class FaithfulParams(Params):
     max_slide_frac: float = 0.25
     max_turn: float = 10.0
     carry: bool = True
+    joint_settle_frames: int = 240
     joint_frames: int = 120
     joint_tol: float = 0.005
     joint_tol_deg: float = 1.0
     max_stable_angle: float = 45.0
-    max_roll: float = 0.1
+    max_candidates: int = 3
+    tilt_test: float = 4.0
+    tilt_frames: int = 60
     contact_tol: float = 0.004
     retry_damping: float = 0.9
     retry_rolling_friction: float = 0.1
 
     def check(self) -> None:
         """Reject negative bounds and ``retry_damping`` outside [0, 1) (``ValueError``)."""
-        for key in ("max_flush_angle", "max_stable_angle", "max_roll", "joint_frames", "joint_tol", "joint_tol_deg",
-                    "max_slide", "max_slide_frac", "max_turn", "contact_tol", "retry_rolling_friction"):
+        for key in ("max_flush_angle", "max_stable_angle", "max_candidates", "tilt_test", "tilt_frames",
+                    "joint_settle_frames", "joint_frames", "joint_tol", "joint_tol_deg", "max_slide",
+                    "max_slide_frac", "max_turn", "contact_tol", "retry_rolling_friction"):
             if getattr(self, key) < 0:
                 raise ValueError(f"faithful parameter {key!r} must be >= 0, got {getattr(self, key)}")
         if not 0.0 <= self.retry_damping < 1.0:
@@ -186,9 +210,12 @@ def resting_normals(hull_points: np.ndarray) -> np.ndarray:
     return np.array([T[:3, :3].T @ np.array([0.0, 0.0, -1.0]) for T in transforms]).reshape(-1, 3)
 
 
-def flush_pose(pose: np.ndarray, normals_local: np.ndarray, com_local: np.ndarray, up: np.ndarray,
-               max_angle_deg: float) -> tuple[np.ndarray, float]:
-    """The pose rotated so its nearest resting facet faces ``-up``, about its centre of mass.
+def resting_candidates(pose: np.ndarray, normals_local: np.ndarray, com_local: np.ndarray, up: np.ndarray,
+                       max_angle_deg: float) -> list[tuple[np.ndarray, float]]:
+    """The pose rotated onto each resting facet within ``max_angle_deg`` of facing ``-up``, nearest first.
+
+    Each candidate is the smallest rotation, about the centre of mass, that makes one resting facet face
+    exactly ``-up``.
 
     Parameters
     ----------
@@ -201,29 +228,68 @@ def flush_pose(pose: np.ndarray, normals_local: np.ndarray, com_local: np.ndarra
     up : (3,) float
         Unit supporter normal.
     max_angle_deg
-        Rotations larger than this are not applied.
+        Facets farther than this from ``-up`` are left out.
+
+    Returns
+    -------
+    list of (pose (4, 4), angle in deg), sorted by angle; a facet already flush (angle < 1e-9) gives ``pose``
+    itself with angle 0.
+    """
+    if len(normals_local) == 0:
+        return []
+    R, t, s = decompose(pose)
+    world = normals_local @ R.T
+    world = world / np.linalg.norm(world, axis=1, keepdims=True)
+    angles = np.degrees(np.arccos(np.clip(world @ -up, -1.0, 1.0)))
+    c = com_world(pose, com_local)
+    out = []
+    for k in np.argsort(angles, kind="stable"):
+        angle = float(angles[k])
+        if angle > max_angle_deg:
+            break
+        if angle < 1e-9:
+            out.append((pose, 0.0))
+            continue
+        Q = _rotation_between(world[k], -up)
+        out.append((make_pose(Q @ R, c - Q @ (c - t), s), angle))
+    return out
+
+
+def flush_pose(pose: np.ndarray, normals_local: np.ndarray, com_local: np.ndarray, up: np.ndarray,
+               max_angle_deg: float) -> tuple[np.ndarray, float]:
+    """The pose rotated so its nearest resting facet faces ``-up``, about its centre of mass.
+
+    Parameters are those of :func:`resting_candidates`.
 
     Returns
     -------
     pose : (4, 4) float
-        The flushed pose (``pose`` itself when none is within ``max_angle_deg``).
+        The flushed pose (``pose`` itself when no facet is within ``max_angle_deg``).
     angle
         The rotation applied (deg; 0 when none).
     """
-    if len(normals_local) == 0:
-        return pose, 0.0
-    R, t, s = decompose(pose)
-    world = normals_local @ R.T
-    cos = world @ -up
-    k = int(np.argmax(cos))
-    angle = math.degrees(math.acos(float(np.clip(cos[k], -1.0, 1.0))))
-    if angle > max_angle_deg or angle < 1e-9:
-        return pose, 0.0
-    Q = _rotation_between(world[k] / np.linalg.norm(world[k]), -up)
-    c = transform_points(pose, np.asarray(com_local, dtype=float)[None])[0]
-    R2 = Q @ R
-    t2 = c - Q @ (c - t)
-    return make_pose(R2, t2, s), angle
+    candidates = resting_candidates(pose, normals_local, com_local, up, max_angle_deg)
+    return candidates[0] if candidates else (pose, 0.0)
+
+
+def carried(pose: np.ndarray, com_local: np.ndarray, supporter_before: np.ndarray,
+            supporter_after: np.ndarray) -> np.ndarray:
+    """``pose`` (4, 4) translated as its supporter's point at the object's centre of mass moved.
+
+    Parameters
+    ----------
+    pose : (4, 4) float
+        The object's input pose.
+    com_local : (3,) float
+        Its centre of mass, local frame.
+    supporter_before, supporter_after : (4, 4) float
+        The supporter's input and grounded poses.
+    """
+    c = com_world(pose, com_local)
+    moved = transform_points(supporter_after @ np.linalg.inv(supporter_before), c[None])[0]
+    out = np.array(pose, dtype=float, copy=True)
+    out[:3, 3] += moved - c
+    return out
 
 
 def com_world(pose: np.ndarray, com_local: np.ndarray) -> np.ndarray:
@@ -244,6 +310,17 @@ def within_bounds(before: np.ndarray, after: np.ndarray, com_local: np.ndarray, 
     turned = math.degrees(rotation_angle(decompose(before)[0], decompose(after)[0]))
     bound = min(fp.max_slide, fp.max_slide_frac * diag)
     return moved <= bound and turned <= fp.max_turn, moved, turned
+
+
+def closeness(reference: np.ndarray, result: np.ndarray, com_local: np.ndarray, diag: float) -> float:
+    """How far settling took an object from ``reference`` (m): horizontal centre-of-mass shift plus the arc its
+    rotation sweeps at half the bounding-box diagonal (``diag`` / 2 times the angle in rad).
+
+    The vertical drop onto a supporter is free, as in :func:`within_bounds`.
+    """
+    step = com_world(result, com_local) - com_world(reference, com_local)
+    turned = rotation_angle(decompose(reference)[0], decompose(result)[0])
+    return float(np.linalg.norm(step[:2]) + 0.5 * diag * turned)
 
 
 def lost_supporters(below: list[str], leaning: list[str], touching: list[str]) -> list[str]:
@@ -267,7 +344,8 @@ def certificate(settled: bool | None, remedy: str, below: list[str], leaning: li
         Whether the final pose met the settling criterion.
     remedy
         What produced the final pose: ``none``, ``extra_frames``, ``damping`` (the paper's remedies),
-        ``stable``, ``rolled``, ``damped`` (faithful retries), ``held`` (frozen at the corrected pose), ``attached``.
+        ``stable``, ``damped`` (faithful retries), ``closest`` (no start was accepted: the closest settled
+        result), ``attached``.
     below, leaning
         The graph's supporters of the object from below (``supports``, ``contains``) and those it leans on.
     touching

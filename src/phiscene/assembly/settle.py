@@ -212,3 +212,46 @@ def _result(world: BulletWorld, name: str, win: _Window, settled: bool, remedy: 
     dt, dr = win.motion()
     return SettleResult(pose=world.pose(name), frames=win.frames, settled=settled, remedy=remedy,
                         residual_translation=dt, residual_rotation=dr)
+
+
+def holds_when_tilted(world: BulletWorld, name: str, tilt_deg: float, frames: int, tol_pos: float,
+                      tol_rot_deg: float) -> bool:
+    """Whether body ``name``, at rest, stays put when gravity tilts by ``tilt_deg`` towards +x, -x, +y and -y.
+
+    The settling criterion only says the object stopped moving; an object balanced on an edge, or with its
+    centre of mass just inside its support, stops too, and topples at the first disturbance (the release of the
+    whole scene, another simulator). Tilting gravity by ``d`` is tilting the whole context by ``d``: statics says
+    a resting body stays when its centre of mass, projected along the tilted gravity, is still over its support
+    (a margin of about ``h tan d`` for a centre of mass at height ``h``) and friction holds (``tan d`` below the
+    friction coefficient). Each direction is simulated ``frames`` frames from the body's pose; it holds when it
+    ends within ``tol_pos`` (m) and ``tol_rot_deg`` of the pose every time. Gravity and the pose are restored.
+
+    Parameters
+    ----------
+    world
+        The world (``name`` dynamic, its context static).
+    name
+        The body.
+    tilt_deg
+        Tilt of gravity from -z (deg).
+    frames
+        Frames per direction.
+    tol_pos, tol_rot_deg
+        How far it may end from its pose (m, deg).
+    """
+    start = world.pose(name)
+    s, c = np.sin(np.radians(tilt_deg)), np.cos(np.radians(tilt_deg))
+    held = True
+    try:
+        for dx, dy in ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)):
+            world.set_pose(name, start)
+            world.set_gravity((s * dx, s * dy, -c))
+            world.step_frames(frames)
+            moved, turned = window_motion(start, world.pose(name))
+            if moved > tol_pos or np.degrees(turned) > tol_rot_deg:
+                held = False
+                break
+    finally:
+        world.set_gravity()
+        world.set_pose(name, start)
+    return held

@@ -98,7 +98,7 @@ def joint_sim(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, params:
     Parameters
     ----------
     scene
-        The scene to release (every object dynamic).
+        The scene to release (every object dynamic, but those ``attached`` to a wall or the ceiling: static).
     proxies
         Convex proxies by object id.
     sim
@@ -116,7 +116,7 @@ def joint_sim(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, params:
         JSON-ready log: ``format``, ``params``, ``sim``, ``frames``, ``all_settled``, ``unsettled`` (ids),
         ``objects`` (per id: ``settled`` (criterion met at the last frame), ``residual_translation`` m,
         ``residual_rotation`` rad (motion over the last window, ``None`` if fewer than ``w`` frames ran),
-        ``displacement`` m, ``rotation_change`` rad), ``seconds``.
+        ``displacement`` m, ``rotation_change`` rad; attached objects are left out), ``seconds``.
 
     Raises
     ------
@@ -128,7 +128,7 @@ def joint_sim(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, params:
 
     t0 = time.perf_counter()
     check_proxies(scene, proxies)
-    ids = scene.ids
+    ids = [o.id for o in scene.objects if o.attached is None]
     frames = 0
     with BulletWorld(sim, cache_dir) as world:
         world.add_ground(scene.ground_height)
@@ -136,6 +136,8 @@ def joint_sim(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, params:
         for o in scene.objects:
             hulls = proxies[o.id].hulls
             world.add_body(o.id, hulls, o.pose, rigid_props(o.mesh(), hulls, sim.density, decompose(o.pose)[2]))
+            if o.attached is not None:
+                world.set_static(o.id)  # fixed to a wall or the ceiling: a collider, never released
         history = {oid: deque([world.pose(oid)], maxlen=params.window + 1) for oid in ids}
         motion = {oid: (float("inf"), float("inf")) for oid in ids}
         met = {oid: False for oid in ids}
@@ -151,6 +153,8 @@ def joint_sim(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, params:
         poses = {oid: world.pose(oid) for oid in ids}
     objects = {}
     for o in scene.objects:
+        if o.attached is not None:
+            continue
         moved, turned = window_motion(o.pose, poses[o.id])
         objects[o.id] = {"settled": met[o.id], "residual_translation": _finite(motion[o.id][0]),
                          "residual_rotation": _finite(motion[o.id][1]), "displacement": moved,

@@ -285,6 +285,11 @@ class BulletWorld:
         lin, ang = self.p.getBaseVelocity(self.bodies[name].uid)
         return np.asarray(lin), np.asarray(ang)
 
+    def set_gravity(self, direction=(0.0, 0.0, -1.0)) -> None:
+        """Point gravity (magnitude ``GRAVITY``) along the unit vector ``direction`` (3,); default straight down."""
+        d = np.asarray(direction, dtype=float)
+        self.p.setGravity(*(GRAVITY * d / np.linalg.norm(d)).tolist())
+
     def set_static(self, name: str) -> None:
         """Freeze body ``name`` in place (mass 0)."""
         b = self.bodies[name]
