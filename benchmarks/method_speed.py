@@ -7,7 +7,7 @@
 
 Usage::
 
-    python benchmarks/method_speed.py [--results results] [--objects 10]
+    python benchmarks/method_speed.py [--results results] [--objects 10] [--method phi_scene]
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ import yaml  # noqa: E402
 
 from phiscene import topology  # noqa: E402
 from phiscene.assembly.assemble import AssemblyParams, ground_scene  # noqa: E402
+from phiscene.config import method_assembly  # noqa: E402
 from phiscene.proxies import ProxyParams, proxy_for_mesh, scene_proxies  # noqa: E402
 from phiscene.runner import set_threads  # noqa: E402
 from phiscene.scene import load_scene  # noqa: E402
@@ -34,11 +35,11 @@ from phiscene.sim.settings import SimSettings  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def time_scene(scene_path: Path, cfg: dict, cache: Path) -> dict:
-    """Topology, SDF and settling seconds of one scene (proxies and grids warmed first)."""
+def time_scene(scene_path: Path, cfg: dict, cache: Path, method: str = "phi_scene") -> dict:
+    """Topology, SDF and settling seconds of one scene grounded by ``method`` (proxies and grids warmed first)."""
     scene = load_scene(scene_path)
     proxies = scene_proxies(scene, ProxyParams.from_dict(cfg["proxies"]), cache)
-    params, sim = AssemblyParams.from_dict(cfg["assembly"]), SimSettings.from_dict(cfg["sim"])
+    params, sim = AssemblyParams.from_dict(method_assembly(cfg, method)), SimSettings.from_dict(cfg["sim"])
     graph = topology.infer(scene, "geometric", cfg["topology"].get("geometric", {}))
     ground_scene(scene, graph.order, proxies, params, sim, cache, graph=graph)  # warm: SDF grids, hull files, imports
     t0 = time.perf_counter()
@@ -56,17 +57,18 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--results", default=str(ROOT / "results"))
     ap.add_argument("--objects", type=int, default=10)
+    ap.add_argument("--method", default="phi_scene", help="a phi_scene-kind method of config.yaml")
     args = ap.parse_args()
     set_threads(1)
     cfg = yaml.safe_load((ROOT / "config/config.yaml").read_text())
     results = Path(args.results)
     cache = results / "cache"
     scenes = sorted((results / "scenes/contact").glob("*/initial/scene.json"))
-    rows = [time_scene(p, cfg, cache) for p in scenes]
+    rows = [time_scene(p, cfg, cache, args.method) for p in scenes]
     if rows:
         keys = ["objects", "topology_s", "sdf_s", "settle_s", "total_s"]
         mean = {k: float(np.mean([r[k] for r in rows])) for k in keys}
-        print(f"contact suite, {len(rows)} scenes, warm caches, 1 thread: mean per scene "
+        print(f"{args.method}: contact suite, {len(rows)} scenes, warm caches, 1 thread: mean per scene "
               + ", ".join(f"{k} {v:.2f}" for k, v in mean.items())
               + f"; max total {max(r['total_s'] for r in rows):.2f} s; unsettled objects "
               f"{sum(r['unsettled'] for r in rows)}")
@@ -78,7 +80,7 @@ def main() -> int:
                   "sim": cfg["sim"], "proxies": cfg["proxies"]}
         build_scene(tmp / "scene", "contact", 0, params, cache)
         scene_path = tmp / "scene/initial/scene.json"
-        r = time_scene(scene_path, cfg, cache)
+        r = time_scene(scene_path, cfg, cache, args.method)
         print(f"{r['objects']}-object scene, warm caches, 1 thread: topology {r['topology_s']:.2f} s, "
               f"SDF {r['sdf_s']:.2f} s, settling {r['settle_s']:.2f} s, total {r['total_s']:.2f} s "
               f"(target <= 3 s); unsettled {r['unsettled']}")

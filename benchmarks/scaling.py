@@ -79,6 +79,7 @@ def worker(stage: str, n: int, work: Path, cfg: dict) -> dict:
     ``seconds`` and ``stage_mb`` are the stage's own work, not the interpreter's start-up.
     """
     from phiscene import pipeline
+    from phiscene.config import method_assembly
     from phiscene.runner import set_threads
 
     set_threads(1)
@@ -104,8 +105,8 @@ def worker(stage: str, n: int, work: Path, cfg: dict) -> dict:
         "topology": lambda: pipeline.run_topology(p["initial"], p["topology"], "geometric",
                                                   cfg["topology"].get("geometric", {})),
         "ground": lambda: pipeline.run_ground(p["initial"], p["topology"], p["proxies"], p["grounded"],
-                                              p["ground_log"], cfg["assembly"], cfg["sim"], p["cache"],
-                                              progress=lambda line: None),
+                                              p["ground_log"], method_assembly(cfg, "phi_scene"), cfg["sim"],
+                                              p["cache"], progress=lambda line: None),
         "physical": lambda: pipeline.run_metrics(
             [{"method": "phi_scene", "scene": p["grounded"], "out": p["physical"], "sections": ["physical"]}],
             {"physical": cfg["metrics"]["physical"], "sim": cfg["sim"]}, proxies_path=p["proxies"],
