@@ -14,7 +14,7 @@ from phiscene.metrics.physical import PhysicalParams, physical_metrics
 from phiscene.proxies import ProxyParams, scene_proxies
 from phiscene.scene import Scene, SceneObject
 from phiscene.sim.settings import SimSettings
-from phiscene.topology.attached import AttachedParams, attached_ids, attached_objects, says_mounted
+from phiscene.topology.attached import AttachedParams, attached_ids, attached_objects, names_fixture, says_mounted
 from phiscene.transforms import make_pose
 
 SIM = SimSettings()
@@ -41,6 +41,27 @@ def room(tmp_path_factory):
 def test_descriptions():
     assert says_mounted("paper poster on the back wall") and says_mounted("brown ceiling fan")
     assert says_mounted("white curtain") and not says_mounted("wooden chair") and not says_mounted("red book")
+
+
+def test_fixture_names_are_read_from_the_head_of_the_description():
+    assert names_fixture("white curtains on left window") and names_fixture("window_in_middle".replace("_", " "))
+    assert not names_fixture("plant on the window sill") and not names_fixture("radiator under middle window")
+    assert not names_fixture("wooden chair")
+
+
+def test_a_window_over_a_radiator_and_a_floor_length_curtain_are_attached(tmp_path):
+    """Fixtures are attached whatever stands under them; a plant on the sill under the same window stays free."""
+    boxes = {"radiator": (0.8, 0.1, 0.5), "window": (0.8, 0.05, 1.0), "curtain": (0.4, 0.05, 2.2),
+             "plant": (0.15, 0.15, 0.2)}
+    mesh = {n: save_mesh(trimesh.creation.box(s), tmp_path / f"{n}.obj") for n, s in boxes.items()}
+    scene = Scene([
+        SceneObject("radiator", mesh["radiator"], make_pose(translation=[0, 0, 0.25]), "white radiator"),
+        SceneObject("window", mesh["window"], make_pose(translation=[0, 0, 1.0]), "window in the middle"),
+        SceneObject("curtain", mesh["curtain"], make_pose(translation=[1.0, 0, 1.1]), "white curtains on the window"),
+        SceneObject("plant", mesh["plant"], make_pose(translation=[0.2, -0.1, 0.6]), "plant on the window sill"),
+    ])
+    decided = attached_objects(scene)
+    assert decided == {"window": "fixture", "curtain": "fixture"}
 
 
 def test_decision_from_geometry_and_description(room):

@@ -16,7 +16,11 @@ its footprint):
   ``ceiling_gap`` of the highest point of the scene while its bottom is above ``min_height`` (a ceiling
   fixture), when the scene is a room (its height is at least ``room_height``).
 
-Objects resting on something stay free whatever their description says (a painting standing on a dresser).
+Objects resting on something stay free whatever their description says (a painting standing on a dresser), except
+building fixtures (:data:`FIXTURE_WORDS`: windows, curtains, blinds), which are part of the room wherever they reach:
+a window above a radiator or a floor-length curtain is attached whatever is under it and however low it starts. The
+fixture word must name the object itself, in the description's head before its first preposition ("white curtains
+on the left window" is a fixture, "plant on the window sill" is not).
 """
 
 from __future__ import annotations
@@ -33,6 +37,10 @@ from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph
 WALL_WORDS = ("poster", "painting", "picture", "artwork", "art", "frame", "framed", "window", "curtain", "curtains",
               "blind", "blinds", "whiteboard", "blackboard", "chalkboard", "clock", "mirror", "fan", "chandelier",
               "sconce", "pendant", "canvas", "print", "photo", "photograph", "calendar", "board", "tapestry")
+#: Words naming building fixtures: attached wherever they reach (module docstring).
+FIXTURE_WORDS = ("window", "windows", "curtain", "curtains", "drape", "drapes", "blind", "blinds")
+#: Prepositions that end a description's head ("<head> on the <supporter>").
+HEAD_END = ("on", "under", "in", "at", "by", "near", "beside", "above", "below", "next", "with", "over", "against")
 #: Phrases saying an object is mounted (matched in the lower-case description).
 MOUNT_PHRASES = ("on the wall", "on wall", "wall mounted", "wall-mounted", "mounted", "hanging", "hung",
                  "on the ceiling", "from the ceiling", "ceiling")
@@ -91,6 +99,18 @@ def says_mounted(description: str) -> bool:
     return bool(words & set(WALL_WORDS)) or any(p in text for p in MOUNT_PHRASES)
 
 
+def names_fixture(description: str) -> bool:
+    """Whether a description's head (the words before its first :data:`HEAD_END` preposition) names a building
+    fixture (:data:`FIXTURE_WORDS`)."""
+    words = re.findall(r"[a-z]+", description.lower())
+    head = []
+    for w in words:
+        if w in HEAD_END:
+            break
+        head.append(w)
+    return bool(set(head) & set(FIXTURE_WORDS))
+
+
 def _held_from_below(scene, oid: str, world: dict, ground: float, params: AttachedParams) -> bool:
     """Whether a surface (another object or the ground) lies within ``support_gap`` under ``oid``'s lowest points."""
     import trimesh
@@ -124,7 +144,7 @@ def _held_from_below(scene, oid: str, world: dict, ground: float, params: Attach
 
 
 def attached_objects(scene, params: AttachedParams = AttachedParams()) -> dict[str, str]:
-    """Objects decided attached (module docstring) -> why (``description``, ``panel`` or ``ceiling``).
+    """Objects decided attached (module docstring) -> why (``fixture``, ``description``, ``panel`` or ``ceiling``).
 
     Objects already marked :attr:`~phiscene.scene.SceneObject.attached` in the scene are kept (reason ``given``).
     """
@@ -137,6 +157,9 @@ def attached_objects(scene, params: AttachedParams = AttachedParams()) -> dict[s
     room = top - ground >= params.room_height
     for o in scene.objects:
         if o.id in out:
+            continue
+        if names_fixture(o.description or o.id.replace("_", " ")):
+            out[o.id] = "fixture"
             continue
         m = world[o.id]
         lo, hi = m.bounds
