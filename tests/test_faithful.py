@@ -36,7 +36,8 @@ def work(tmp_path_factory):
     fruit.apply_scale([1.0, 1.0, 0.9])
     meshes = {"table": trimesh.creation.box((0.8, 0.8, 0.1)), "box": trimesh.creation.box((0.1, 0.1, 0.1)),
               "block": trimesh.creation.box((0.2, 0.1, 0.05)), "plank": trimesh.creation.box((0.5, 0.05, 0.02)),
-              "fruit": fruit}
+              "fruit": fruit, "slab": trimesh.creation.box((0.3, 0.3, 0.04)),
+              "column": trimesh.creation.box((0.1, 0.1, 0.3))}
     return {"root": root, "cache": root / "cache",
             "meshes": {n: save_mesh(m, root / f"{n}.obj") for n, m in meshes.items()}}
 
@@ -116,6 +117,30 @@ def test_leaning_plank_keeps_both_supporters(work):
     cert = rec["objects"]["plank"]["certificate"]
     assert {"ground", "box"} <= set(cert["touching"]) and cert["supporters_kept"]
     assert cert["displacement"] < 0.03
+
+
+@pytest.mark.parametrize("max_shift", [0.09, 0.0])
+def test_column_straddling_a_step_is_shifted_to_stand(work, max_shift):
+    # a 0.3 m column whose base (0.1 wide) straddles the edge of a 4 cm slab (edge at x = 0.15), its centre of mass
+    # 1 cm beyond the edge: it tips over off the step. Shifted 3 cm back it stands on the slab: its centre of mass
+    # 2 cm inside the edge, 15 cm up, so it holds up to atan(2/15) = 7.6 deg of tilt (> the 4 deg tilt test).
+    slab = make_pose(translation=(0.0, 0.0, 0.02))
+    pose = make_pose(translation=(0.16, 0.0, 0.04 + 0.15 + 0.001))
+    scene = scene_of(work, {"slab": ("slab", slab), "column": ("column", pose)})
+    g = graph_of(scene, [("ground", "slab", "supports"), ("slab", "column", "supports"),
+                         ("ground", "column", "supports")])
+    out, rec = run(work, scene, g, params={"faithful": {"enabled": True, "max_shift": max_shift}})
+    R, t, _ = decompose(out.get("column").pose)
+    upright = math.degrees(math.acos(min(1.0, R[2, 2])))
+    cert = rec["objects"]["column"]["certificate"]
+    if max_shift == 0:  # without the remedy it topples: the guarded settling alone cannot keep it standing
+        assert upright > 45
+        return
+    assert cert["remedy"].startswith("shifted") and cert["settled"] and cert["supporters_kept"]
+    assert upright < 1.0
+    assert np.linalg.norm(t[:2] - pose[:2, 3]) <= max_shift + 1e-6
+    assert t[0] < 0.15  # its centre of mass over the slab it stands on
+    assert cert["joint_stable"]
 
 
 def test_paper_loop_unchanged_without_faithful(work):

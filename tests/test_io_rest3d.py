@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 from phiscene.errors import InputError
 from phiscene.io.placed import PlacedParams, level_objects, read_placed_dir
 from phiscene.io.rest3d import import_rest3d, read_rest3d, reference_up, scene_ids
-from phiscene.levelling import LevelParams, angle_deg, estimate_up
+from phiscene.levelling import LevelParams, angle_deg, estimate_up, floor_height, levelling_transform
 from phiscene.scene import load_scene
 from tests.rest3d_fixture import objects, write_scene
 
@@ -109,3 +109,26 @@ def test_own_frame_method_rotation_by_icp(tmp_path):
     assert m["displacement_max"] < 1e-6
     assert m["rotation_max"] == pytest.approx(20.0, abs=0.5)
     assert m["rotation_mean"] == pytest.approx(np.degrees(sum(turn)) / 4, abs=0.5)
+
+
+def _box(lo, hi) -> np.ndarray:
+    return trimesh.creation.box(bounds=np.array([lo, hi], dtype=float)).vertices
+
+
+def test_floor_is_where_the_standing_objects_stand():
+    # five objects on the floor whose bottoms err by depth (one sunk 15 cm), a book on one of them, a chair tucked
+    # under a table and a poster high on a wall: the ground is the median of the five floor bottoms and the two
+    # under/over the table, neither the sunk object's bottom (the lowest point) nor the book's or the poster's
+    standing = {"a": 0.0, "b": 0.02, "sunk": -0.15, "c": 0.01, "d": 0.03}
+    parts = [_box((3 * k, 0, z), (3 * k + 1, 1, z + 0.5)) for k, z in enumerate(standing.values())]
+    parts.append(_box((0.2, 0.2, 0.5), (0.6, 0.6, 0.55)))  # book on "a" (its top 0.5 is below the book's middle)
+    parts.append(_box((20, 0, 0.04), (21.2, 0.8, 0.8)))  # table (its top above the chair's middle) ...
+    parts.append(_box((20.3, 0.2, 0.0), (20.7, 0.6, 0.9)))  # ... and the chair under it: both stand on the ground
+    parts.append(_box((30, 0, 1.2), (30.6, 0.02, 1.8)))  # poster: nothing beneath, but 1.35 m above the lowest
+    expected = float(np.median([*standing.values(), 0.04, 0.0]))
+    assert floor_height(parts, 0.25) == pytest.approx(expected)
+    assert floor_height(parts, 0.0) == pytest.approx(-0.15)  # band 0: the lowest point
+    # levelling_transform puts that height at z = 0 (up already +z: a pure vertical shift)
+    T = levelling_transform(parts, [0.0, 0.0, 1.0], floor_band=0.25)
+    np.testing.assert_allclose(T[:3, :3], np.eye(3), atol=1e-12)
+    assert T[2, 3] == pytest.approx(-expected)

@@ -19,8 +19,12 @@ top and the furniture. Its spread (weighted RMS angle of the inliers) is reporte
 
 :func:`levelling_transform` turns the estimate into a rigid transform: the minimal rotation taking up to +z,
 preceded by the up-axis convention of the source (y-up files become z-up), a rotation about z that makes the
-camera's viewing direction +y (x is the camera's right), and a translation that puts the lowest point of the
-scene on the ground plane ``z = 0`` (the feet of the furniture, or of the table in a table-top photo).
+camera's viewing direction +y (x is the camera's right), and a translation that puts the ground plane at
+``z = 0``. The ground (:func:`floor_height`) is where the objects standing on it stand: the median of the bottoms
+of the objects with nothing beneath them, within ``floor_band`` of the lowest (the feet of the furniture, or the
+table in a table-top photo). Depth errors move objects along the camera's ray, which looks down: the lowest point
+of the scene belongs to the object sunk deepest, and putting it on the ground would lift everything else (by
+4 to 16 cm on the ``clutter`` suite's initial scenes). The median moves the floor-standing objects least in total.
 """
 
 from __future__ import annotations
@@ -56,6 +60,9 @@ class LevelParams(Params):
         Faces sampled (by area) per object as candidate plane normals.
     seed
         Seed of that sampling.
+    floor_band
+        Ground height (:func:`floor_height`): objects with nothing beneath them whose bottoms lie within this
+        height (m) of the lowest one stand on the ground; 0 = the lowest point of the scene.
     """
 
     _label = "levelling parameters"
@@ -67,6 +74,7 @@ class LevelParams(Params):
     inlier_deg: float = 10.0
     candidates: int = 1500
     seed: int = 0
+    floor_band: float = 0.25
 
     def check(self) -> None:
         """Angles in (0, 90) degrees, shares in (0, 1], positive counts (``ValueError``)."""
@@ -75,8 +83,8 @@ class LevelParams(Params):
                 raise ValueError(f"levelling parameter {key!r} must be in (0, 90) degrees, got {getattr(self, key)}")
         if not 0.0 < self.plane_share <= 1.0:
             raise ValueError(f"levelling parameter 'plane_share' must be in (0, 1], got {self.plane_share}")
-        if self.box_weight < 0 or self.candidates < 1:
-            raise ValueError("levelling parameters 'box_weight' must be >= 0 and 'candidates' >= 1")
+        if self.box_weight < 0 or self.candidates < 1 or self.floor_band < 0:
+            raise ValueError("levelling parameters 'box_weight' and 'floor_band' must be >= 0 and 'candidates' >= 1")
 
 
 @dataclass(frozen=True)
@@ -233,18 +241,60 @@ def rotation_between(a, b) -> np.ndarray:
     return Rotation.from_rotvec(axis / s * np.arctan2(s, c)).as_matrix()
 
 
-def levelling_transform(points: np.ndarray, up, forward=None) -> np.ndarray:
-    """The rigid transform (4, 4) that levels a scene: ``up`` -> +z, ``forward`` -> +y, lowest point at z = 0.
+#: Share of an object's footprint another object must cover to count as beneath it (:func:`floor_height`).
+BENEATH_SHARE = 0.25
+
+
+def floor_height(parts: list[np.ndarray], band: float) -> float:
+    """Height of the ground under a levelled scene (z up): where the objects standing on it stand.
+
+    An object stands on the ground unless another one is beneath it: covering at least ``BENEATH_SHARE`` of its
+    bounding-box footprint with a top below its mid-height (a book on a table; a chair tucked under a table
+    is not on it). Of those, the ones whose bottoms lie within ``band`` of the lowest bottom are taken (a poster
+    on a wall has nothing beneath it either), and the ground is the median of their bottoms.
 
     Parameters
     ----------
-    points : (n, 3) float
-        Every vertex of the scene, source frame (for the ground height).
+    parts : list of (n_i, 3) float
+        Each object's vertices, levelled (z up).
+    band
+        Height band above the lowest standing object (m); 0 = the lowest point of the scene.
+
+    Returns
+    -------
+    The ground height (m).
+    """
+    lo = np.array([p.min(axis=0) for p in parts])
+    hi = np.array([p.max(axis=0) for p in parts])
+    if band <= 0 or len(parts) < 2:
+        return float(lo[:, 2].min())
+    mid = 0.5 * (lo[:, 2] + hi[:, 2])
+    area = np.maximum(np.prod(hi[:, :2] - lo[:, :2], axis=1), 1e-12)
+    standing = []
+    for i in range(len(parts)):
+        overlap = np.prod(np.clip(np.minimum(hi[:, :2], hi[i, :2]) - np.maximum(lo[:, :2], lo[i, :2]), 0, None),
+                          axis=1)
+        beneath = (overlap >= BENEATH_SHARE * area[i]) & (hi[:, 2] < mid[i])
+        beneath[i] = False
+        standing.append(not beneath.any())
+    bottoms = lo[np.array(standing), 2]
+    return float(np.median(bottoms[bottoms <= bottoms.min() + band]))
+
+
+def levelling_transform(parts, up, forward=None, floor_band: float = 0.0) -> np.ndarray:
+    """The rigid transform (4, 4) that levels a scene: ``up`` -> +z, ``forward`` -> +y, the ground at z = 0.
+
+    Parameters
+    ----------
+    parts : list of (n_i, 3) float, or (n, 3) float
+        Each object's vertices (or every vertex of the scene as one part), source frame (for the ground height).
     up : (3,) float
         Unit up direction in the source frame.
     forward : (3,) float, optional
         The camera's viewing direction in the source frame; its horizontal part becomes +y (default: keep the
         minimal rotation's heading).
+    floor_band
+        :func:`floor_height`'s band (m); 0 = the lowest point on the ground.
     """
     R = rotation_between(up, [0.0, 0.0, 1.0])
     if forward is not None:
@@ -255,5 +305,7 @@ def levelling_transform(points: np.ndarray, up, forward=None) -> np.ndarray:
             R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ R
     T = np.eye(4)
     T[:3, :3] = R
-    T[2, 3] = -float((np.asarray(points, dtype=float) @ R.T)[:, 2].min())
+    if isinstance(parts, np.ndarray):
+        parts = [parts]
+    T[2, 3] = -floor_height([np.asarray(p, dtype=float) @ R.T for p in parts], floor_band)
     return T

@@ -5,7 +5,7 @@ bumping one here after a behaviour change reruns exactly the affected jobs
 (Snakemake reruns a job whose params changed).
 """
 
-BENCHMARK = 1
+BENCHMARK = 2
 PROXIES = 1
 TOPOLOGY = 1
 GROUND = 1

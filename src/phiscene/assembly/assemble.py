@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -353,10 +354,11 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                      fp: FaithfulParams, info: dict, rec: dict) -> np.ndarray:
     """Guarded settling (see :mod:`phiscene.assembly.faithful`); fills ``rec``; returns the frozen pose.
 
-    Every start (the corrected pose, then the nearest resting poses, then a damped run) is lowered onto what
-    lies beneath and settled with the paper's settling; the first result within the slide/turn bounds that
-    keeps the graph's supporters is taken, else the closest settled one. The final pose is always the outcome
-    of free settling, so it is as stable as the paper's.
+    Every start (the corrected pose, then the nearest resting poses, then a damped run, then horizontal shifts
+    when every start so far went farther than ``max_shift`` or lost its supporters) is lowered onto what lies
+    beneath and settled with the paper's settling; the first result within the slide/turn bounds that keeps the
+    graph's supporters is taken, else the closest settled one that stayed in place, else the closest. The final
+    pose is always the outcome of free settling, so it is as stable as the paper's.
     """
     from phiscene.inertia import rigid_props
 
@@ -369,7 +371,9 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
 
     tried: list[dict] = []
 
-    def attempt(label: str, start: np.ndarray, damped: bool = False) -> dict:
+    def attempt(label: str, start: np.ndarray, damped: bool = False, origin: np.ndarray | None = None) -> dict:
+        # origin: where the slide bound is measured from (a shifted start: the start itself)
+        origin = pose if origin is None else origin
         start = _lowered(world, oid, start, context, fp.contact_tol / 2)
         world.set_pose(oid, start)
         frames = 0
@@ -382,11 +386,11 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
             world.set_pose(oid, first.pose)  # at rest; then normal settings decide whether it stays
         result = settle_object(world, oid, sp)
         frames += result.frames
-        ok, moved, turned = fa.within_bounds(pose, result.pose, info["com"], info["diag"], fp)
+        ok, moved, turned = fa.within_bounds(origin, result.pose, info["com"], info["diag"], fp)
         lost = fa.lost_supporters(info["below"], info["leaning"], touching())
         near = touching()
-        robust = True
-        if result.settled and fp.tilt_test > 0 and not info["leaning"]:  # leaning: held by friction, not balance
+        robust = True  # tested only where it decides acceptance: a settled result in place on its supporters
+        if result.settled and ok and not lost and fp.tilt_test > 0 and not info["leaning"]:  # leaning: friction
             robust = holds_when_tilted(world, oid, fp.tilt_test, fp.tilt_frames, fp.joint_tol, fp.joint_tol_deg)
             frames += 4 * fp.tilt_frames
         whys = ["" if ok else f"moved {moved:.3f} m / {turned:.1f} deg",
@@ -394,6 +398,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                 "" if robust else f"marginal: tips when tilted {fp.tilt_test:g} deg"]
         out = {"label": label, "result": result, "frames": frames,
                "ok": ok and not lost and result.settled and robust, "lost": bool(lost), "robust": robust,
+               "stayed": ok and not lost, "travel": moved if not lost else math.inf,
                "cost": fa.closeness(pose, result.pose, info["com"], info["diag"]),
                "why": "; ".join(w for w in whys if w), "touching": near}
         tried.append(out)
@@ -407,10 +412,21 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                 break
         if not any(t["ok"] for t in tried):
             attempt("damped", pose, damped=True)
+        travelled = min(t["travel"] for t in tried)
+        if travelled > fp.max_shift:  # every start went far (fell, lost its supporters): one nearby may hold
+            step = min(fp.max_slide, fp.max_slide_frac * info["diag"])
+            rings: dict[float, list] = {}
+            for start, r in fa.shifted_starts(pose, step, fp.max_shift, fp.shift_directions):
+                rings.setdefault(r, []).append(start)
+            for r, ring in rings.items():  # nearest ring first; stop at an accepted start, or after a ring
+                done = [attempt(f"shifted {r:.3f} m", s, origin=s) for s in ring]  # where one rests in place
+                if any(t["ok"] for t in done) or any(t["stayed"] and t["result"].settled for t in done):
+                    break
     ok = [t for t in tried if t["ok"]]
-    # else: a settled result first, then one that holds when tilted, then one that kept its supporters, then the
-    # closest to the corrected input
-    best = ok[0] if ok else min(tried, key=lambda t: (not t["result"].settled, not t["robust"], t["lost"], t["cost"]))
+    # else: a settled result first, then one that stayed in place on its supporters, then one that holds when
+    # tilted, then the closest to the corrected input
+    best = ok[0] if ok else min(tried, key=lambda t: (not t["result"].settled, not t["stayed"], not t["robust"],
+                                                      t["cost"]))
     result = best["result"]
     if not best["ok"]:
         remedy = "closest"

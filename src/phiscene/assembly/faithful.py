@@ -30,9 +30,16 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    ``extra_frames`` / ``damping``); the object's other resting poses within
    ``max_stable_angle``, nearest first, at most ``max_candidates`` of them
    (``stable``); a run with high damping and rolling friction whose resting
-   pose is then settled again at normal settings (``damped``). When none is
-   accepted, the result closest to the corrected input (:func:`closeness`)
-   among the settled ones that kept their supporters is taken (``closest``),
+   pose is then settled again at normal settings (``damped``); when every
+   start so far went farther than ``max_shift`` or lost its supporters (a jug
+   whose base straddles a plate's rim tips over and rolls off the table), the
+   corrected pose shifted horizontally in ``shift_directions`` directions by
+   steps of the slide bound up to ``max_shift`` (``shifted``, nearest first;
+   its slide is measured from the shifted start; the first that stays in place
+   on its supporters ends the search). When none is accepted, the
+   settled result that stayed in place on its supporters, else one that holds
+   when tilted, closest to the corrected input (:func:`closeness`), is taken
+   (``closest``),
    with the reasons in the certificate. The final pose is always the outcome
    of free settling at normal settings: the object is never frozen where the
    simulator would not leave it.
@@ -106,6 +113,12 @@ class FaithfulParams(Params):
         Linear and angular damping of the ``damped`` retry (Bullet units, in [0, 1)).
     retry_rolling_friction
         Rolling and spinning friction of the ``damped`` retry.
+    max_shift
+        Remedy ``shifted``: an object whose every start went farther than this (m) or lost its supporters is
+        restarted from the corrected pose shifted horizontally by multiples of the slide bound up to this
+        distance, nearest first (0 = off).
+    shift_directions
+        Directions per shift distance (evenly spaced, the first along +x).
     """
 
     _label = "faithful parameters"
@@ -128,12 +141,15 @@ class FaithfulParams(Params):
     contact_tol: float = 0.004
     retry_damping: float = 0.9
     retry_rolling_friction: float = 0.1
+    max_shift: float = 0.09
+    shift_directions: int = 6
 
     def check(self) -> None:
         """Reject negative bounds and ``retry_damping`` outside [0, 1) (``ValueError``)."""
         for key in ("max_flush_angle", "max_stable_angle", "max_candidates", "tilt_test", "tilt_frames",
                     "joint_settle_frames", "joint_frames", "joint_tol", "joint_tol_deg", "max_slide",
-                    "max_slide_frac", "max_turn", "contact_tol", "retry_rolling_friction"):
+                    "max_slide_frac", "max_turn", "contact_tol", "retry_rolling_friction", "max_shift",
+                    "shift_directions"):
             if getattr(self, key) < 0:
                 raise ValueError(f"faithful parameter {key!r} must be >= 0, got {getattr(self, key)}")
         if not 0.0 <= self.retry_damping < 1.0:
@@ -272,6 +288,38 @@ def flush_pose(pose: np.ndarray, normals_local: np.ndarray, com_local: np.ndarra
     return candidates[0] if candidates else (pose, 0.0)
 
 
+def shifted_starts(pose: np.ndarray, step: float, max_shift: float, directions: int) -> list[tuple[np.ndarray, float]]:
+    """``pose`` translated horizontally by ``step``, ``2 step``, ... up to ``max_shift`` in ``directions`` directions.
+
+    Parameters
+    ----------
+    pose : (4, 4) float
+        The corrected pose.
+    step
+        Distance between rings (m; the slide bound, so that neighbouring starts cover the plane).
+    max_shift
+        Largest shift (m).
+    directions
+        Evenly spaced directions per ring, the first along +x.
+
+    Returns
+    -------
+    list of (pose (4, 4), shift in m), nearest ring first; empty when ``step``, ``max_shift`` or
+    ``directions`` is 0.
+    """
+    if step <= 0 or max_shift <= 0 or directions <= 0:
+        return []
+    out = []
+    for ring in range(1, int(math.floor(max_shift / step + 1e-9)) + 1):
+        r = ring * step
+        for k in range(directions):
+            a = 2 * math.pi * k / directions
+            start = np.array(pose, dtype=float, copy=True)
+            start[:2, 3] += r * np.array([math.cos(a), math.sin(a)])
+            out.append((start, r))
+    return out
+
+
 def carried(pose: np.ndarray, com_local: np.ndarray, supporter_before: np.ndarray,
             supporter_after: np.ndarray) -> np.ndarray:
     """``pose`` (4, 4) translated as its supporter's point at the object's centre of mass moved.
@@ -344,7 +392,7 @@ def certificate(settled: bool | None, remedy: str, below: list[str], leaning: li
         Whether the final pose met the settling criterion.
     remedy
         What produced the final pose: ``none``, ``extra_frames``, ``damping`` (the paper's remedies),
-        ``stable``, ``damped`` (faithful retries), ``closest`` (no start was accepted: the closest settled
+        ``stable``, ``damped``, ``shifted`` (faithful retries), ``closest`` (no start was accepted: the closest settled
         result), ``attached``.
     below, leaning
         The graph's supporters of the object from below (``supports``, ``contains``) and those it leans on.

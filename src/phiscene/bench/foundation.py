@@ -17,9 +17,10 @@ reference camera and its instance segmentation, every draw from the scene seed:
    by a factor drawn in ``scale``.
 3. **Gravity is unknown.** The scene is expressed in a camera-tilted frame: the ground-truth frame turned by
    the camera's pitch and roll error (``tilt_*``) about the scene centre. The written initial scene is that
-   frame *levelled by the same estimate the real import uses* (:func:`phiscene.levelling.estimate_up`,
-   lowest point on the ground): what a method receives carries the levelling's residual error, as on real
-   data. The raw tilted scene is kept beside it (``initial/camera_frame.json``).
+   frame *levelled by the same estimate the real import uses* (:func:`phiscene.levelling.estimate_up`; the
+   ground where the objects standing on it stand, :func:`phiscene.levelling.floor_height`): what a method
+   receives carries the levelling's residual error, as on real data. The raw tilted scene is kept beside it
+   (``initial/camera_frame.json``).
 4. Contacts, gaps and the release drift are not drawn: they follow from 1-3.
 
 Statistics each parameter reproduces (measured on 117 real SAM 3D Objects meshes in 9 scenes and on published
@@ -359,8 +360,8 @@ def foundation_scene(gt: Scene, camera: dict, labels: np.ndarray, params: Founda
     tilted = _transformed(placed, T_tilt)
     meshes = {o.id: o.world_mesh() for o in tilted.objects}
     estimate = estimate_up(meshes, [0.0, 0.0, 1.0], params.level)
-    points = np.concatenate([m.vertices for m in meshes.values()])
-    T_level = levelling_transform(points, estimate.up)
+    T_level = levelling_transform([np.asarray(m.vertices) for m in meshes.values()], estimate.up,
+                                  floor_band=params.level.floor_band)
     T_level[2, 3] += gt.ground_height
     levelled = _transformed(tilted, T_level)
     T_res = T_level @ T_tilt

@@ -233,14 +233,14 @@ class Levelling:
 
 
 def level_objects(objects: list[PlacedObject], params: PlacedParams, camera: Camera | None = None) -> Levelling:
-    """The levelling transform of placed objects: convention to z-up, estimated up to +z, lowest point at z = 0."""
+    """The levelling transform of placed objects: convention to z-up, estimated up to +z, the ground at z = 0."""
     A = source_to_z_up(params.up)
     meshes = {o.id: o.mesh.copy().apply_transform(_h(A)) for o in objects}
     estimate = estimate_up(meshes, [0.0, 0.0, 1.0], params.levelling) if params.level else None
     up = estimate.up if estimate is not None else np.array([0.0, 0.0, 1.0])
     forward = None if camera is None else A @ (np.asarray(camera.target, float) - np.asarray(camera.eye, float))
-    points = np.concatenate([m.vertices for m in meshes.values()])
-    T = levelling_transform(points, up, forward) @ _h(A)
+    parts = [np.asarray(m.vertices) for m in meshes.values()]
+    T = levelling_transform(parts, up, forward, params.levelling.floor_band) @ _h(A)
     return Levelling(T, estimate)
 
 
