@@ -49,3 +49,22 @@ def test_bad_input_is_one_line(tmp_path):
     assert res.stderr.strip().count("\n") == 0, res.stderr
     assert "scene.json" in res.stderr and "objects[0]" in res.stderr
     assert not (tmp_path / "out/scene.json").exists()
+
+
+def test_ground_command_uses_the_method_settings(tmp_path):
+    cube = save_mesh(trimesh.creation.box([0.1, 0.1, 0.1]), tmp_path / "meshes/cube.glb")
+    save_scene(Scene([SceneObject("cube", cube, make_pose(translation=[0, 0, 0.08]))]), tmp_path / "in/scene.json")
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text("proxies: {backend: convex}\ncache_dir: " + str(tmp_path / "cache") + "\n"
+                   "methods:\n  phi_scene: {kind: phi_scene, assembly: {faithful: {enabled: true}}}\n"
+                   "  phi_scene_paper: {kind: phi_scene}\n  initial: {kind: reference, source: initial}\n")
+    res = phiscene("ground", str(tmp_path / "in"), str(tmp_path / "out"), "--config", str(cfg), cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    log = json.loads((tmp_path / "out/assembly.json").read_text())
+    assert log["params"]["faithful"]["enabled"] is True  # phi_scene by default: faithful grounding ...
+    assert log["objects"]["cube"]["certificate"]["settled"]  # ... with its certificate
+    np.testing.assert_allclose(load_scene(tmp_path / "out/scene.json").get("cube").pose[2, 3], 0.05, atol=1e-3)
+    bad = phiscene("ground", str(tmp_path / "in"), str(tmp_path / "out2"), "--config", str(cfg),
+                   "--method", "initial", cwd=tmp_path)
+    assert bad.returncode == 1 and bad.stderr.strip().count("\n") == 0, bad.stderr
+    assert "'initial'" in bad.stderr and "phi_scene_paper" in bad.stderr

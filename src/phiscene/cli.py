@@ -54,7 +54,17 @@ def cmd_ground(args: argparse.Namespace) -> None:
     scene = _scene_file(Path(args.scene_dir))
     out = Path(args.out_dir)
     cache = Path(args.cache_dir or cfg.get("cache_dir", out / "cache"))
-    backend = args.topology
+    methods = cfg.get("methods") or {}
+    if args.method == "phi_scene" and "phi_scene" not in methods:  # a config without it: its assembly section
+        assembly, backend = cfg.get("assembly", {}), args.topology or "geometric"
+    elif args.method not in methods or methods[args.method].get("kind") != "phi_scene":
+        names = sorted(k for k, v in methods.items() if v.get("kind") == "phi_scene")
+        raise PhisceneError(f"--method {args.method!r}: not a phi_scene-kind method of the config ({', '.join(names)})")
+    else:
+        from phiscene.config import method_assembly
+
+        assembly = method_assembly(cfg, args.method)
+        backend = args.topology or methods[args.method].get("topology", "geometric")
     given = Path(args.given) if args.given else scene.parent.parent / "gt" / "topology.json"
     if backend == "given" and not given.is_file():
         raise PhisceneError(f"{given}: topology file not found (pass --given FILE)")
@@ -66,7 +76,7 @@ def cmd_ground(args: argparse.Namespace) -> None:
             else None, attached=topo.get("attached", {}))),
         ("grounding", lambda: pipeline.run_ground(
             scene, out / "topology.json", out / "proxies.npz", out / "scene.json", out / "assembly.json",
-            cfg.get("assembly", {}), cfg.get("sim", {}), cache,
+            assembly, cfg.get("sim", {}), cache,
             progress=lambda msg: print(f"      {msg}", flush=True))),
     ]
     total = time.perf_counter()
@@ -212,7 +222,10 @@ def build_parser() -> argparse.ArgumentParser:
     g = sub.add_parser("ground", help="physically ground one scene (proxies, topology, SDF + settling)")
     g.add_argument("scene_dir", help="folder with scene.json (or the scene.json itself)")
     g.add_argument("out_dir", help="output folder (scene.json, assembly.json, topology.json, proxies.npz)")
-    g.add_argument("--topology", default="geometric", help="topology backend (default: geometric)")
+    g.add_argument("--method", default="phi_scene",
+                   help="a phi_scene-kind method of the config whose assembly settings and topology backend to use "
+                        "(default: phi_scene, faithful grounding; phi_scene_paper: the paper's loop)")
+    g.add_argument("--topology", default=None, help="topology backend (default: the method's, else geometric)")
     g.add_argument("--given", help="topology JSON for --topology given (default: ../gt/topology.json)")
     g.set_defaults(func=cmd_ground)
 
