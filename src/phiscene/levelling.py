@@ -281,13 +281,13 @@ def floor_height(parts: list[np.ndarray], band: float) -> float:
     return float(np.median(bottoms[bottoms <= bottoms.min() + band]))
 
 
-def levelling_transform(parts, up, forward=None, floor_band: float = 0.0) -> np.ndarray:
+def levelling_transform(parts: list[np.ndarray], up, forward=None, floor_band: float = 0.0) -> np.ndarray:
     """The rigid transform (4, 4) that levels a scene: ``up`` -> +z, ``forward`` -> +y, the ground at z = 0.
 
     Parameters
     ----------
-    parts : list of (n_i, 3) float, or (n, 3) float
-        Each object's vertices (or every vertex of the scene as one part), source frame (for the ground height).
+    parts : list of (n_i, 3) float
+        Each object's vertices, source frame (for the ground height).
     up : (3,) float
         Unit up direction in the source frame.
     forward : (3,) float, optional
@@ -305,7 +305,5 @@ def levelling_transform(parts, up, forward=None, floor_band: float = 0.0) -> np.
             R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ R
     T = np.eye(4)
     T[:3, :3] = R
-    if isinstance(parts, np.ndarray):
-        parts = [parts]
     T[2, 3] = -floor_height([np.asarray(p, dtype=float) @ R.T for p in parts], floor_band)
     return T

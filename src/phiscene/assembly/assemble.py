@@ -387,8 +387,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         result = settle_object(world, oid, sp)
         frames += result.frames
         ok, moved, turned = fa.within_bounds(origin, result.pose, info["com"], info["diag"], fp)
-        lost = fa.lost_supporters(info["below"], info["leaning"], touching())
         near = touching()
+        lost = fa.lost_supporters(info["below"], info["leaning"], near)
         robust = True  # tested only where it decides acceptance: a settled result in place on its supporters
         if result.settled and ok and not lost and fp.tilt_test > 0 and not info["leaning"]:  # leaning: friction
             robust = holds_when_tilted(world, oid, fp.tilt_test, fp.tilt_frames, fp.joint_tol, fp.joint_tol_deg)
@@ -396,9 +396,10 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         whys = ["" if ok else f"moved {moved:.3f} m / {turned:.1f} deg",
                 f"lost supporters {lost}" if lost else "", "" if result.settled else "not settled",
                 "" if robust else f"marginal: tips when tilted {fp.tilt_test:g} deg"]
+        stayed = ok and not lost
         out = {"label": label, "result": result, "frames": frames,
-               "ok": ok and not lost and result.settled and robust, "lost": bool(lost), "robust": robust,
-               "stayed": ok and not lost, "travel": moved if not lost else math.inf,
+               "ok": stayed and result.settled and robust, "lost": bool(lost), "robust": robust,
+               "stayed": stayed, "travel": moved if not lost else math.inf,
                "cost": fa.closeness(pose, result.pose, info["com"], info["diag"]),
                "why": "; ".join(w for w in whys if w), "touching": near}
         tried.append(out)
@@ -415,10 +416,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         travelled = min(t["travel"] for t in tried)
         if travelled > fp.max_shift:  # every start went far (fell, lost its supporters): one nearby may hold
             step = min(fp.max_slide, fp.max_slide_frac * info["diag"])
-            rings: dict[float, list] = {}
-            for start, r in fa.shifted_starts(pose, step, fp.max_shift, fp.shift_directions):
-                rings.setdefault(r, []).append(start)
-            for r, ring in rings.items():  # nearest ring first; stop at an accepted start, or after a ring
+            for r, ring in fa.shifted_starts(pose, step, fp.max_shift, fp.shift_directions):
+                # nearest ring first; stop at an accepted start, or after a ring
                 done = [attempt(f"shifted {r:.3f} m", s, origin=s) for s in ring]  # where one rests in place
                 if any(t["ok"] for t in done) or any(t["stayed"] and t["result"].settled for t in done):
                     break

@@ -288,7 +288,8 @@ def flush_pose(pose: np.ndarray, normals_local: np.ndarray, com_local: np.ndarra
     return candidates[0] if candidates else (pose, 0.0)
 
 
-def shifted_starts(pose: np.ndarray, step: float, max_shift: float, directions: int) -> list[tuple[np.ndarray, float]]:
+def shifted_starts(pose: np.ndarray, step: float, max_shift: float,
+                   directions: int) -> list[tuple[float, list[np.ndarray]]]:
     """``pose`` translated horizontally by ``step``, ``2 step``, ... up to ``max_shift`` in ``directions`` directions.
 
     Parameters
@@ -304,19 +305,21 @@ def shifted_starts(pose: np.ndarray, step: float, max_shift: float, directions: 
 
     Returns
     -------
-    list of (pose (4, 4), shift in m), nearest ring first; empty when ``step``, ``max_shift`` or
-    ``directions`` is 0.
+    list of (shift in m, its ``directions`` poses (4, 4)), nearest ring first; empty when ``step``,
+    ``max_shift`` or ``directions`` is 0.
     """
     if step <= 0 or max_shift <= 0 or directions <= 0:
         return []
+    angles = 2 * math.pi * np.arange(directions) / directions
     out = []
     for ring in range(1, int(math.floor(max_shift / step + 1e-9)) + 1):
         r = ring * step
-        for k in range(directions):
-            a = 2 * math.pi * k / directions
+        starts = []
+        for a in angles:
             start = np.array(pose, dtype=float, copy=True)
             start[:2, 3] += r * np.array([math.cos(a), math.sin(a)])
-            out.append((start, r))
+            starts.append(start)
+        out.append((r, starts))
     return out
 
 
