@@ -27,6 +27,11 @@ def scene_ids(suite):
 def scene_index(wildcards):
     """Position of a job's scene in its suite (the benchmark generator's scene number)."""
     ids = scene_ids(wildcards.suite)
+    if wildcards.scene not in ids:
+        raise ValueError(
+            f"no scene {wildcards.scene!r} in suite {wildcards.suite!r}: its scenes are "
+            f"{', '.join(ids[:3])}{' ... ' + ids[-1] if len(ids) > 3 else ''}"
+        )
     return ids.index(wildcards.scene)
 
 

@@ -30,7 +30,7 @@ from phiscene.params import Params
 from phiscene.proxies import Proxy, check_proxies
 from phiscene.scene import Scene
 from phiscene.sim.settings import SimSettings
-from phiscene.transforms import decompose
+from phiscene.transforms import decompose, transform_points
 
 log = logging.getLogger(__name__)
 
@@ -162,6 +162,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     placed: list[SdfBody] = []
     objects: dict[str, dict] = {}
     coms: dict[str, np.ndarray] = {}  # faithful: centre of mass per object, local frame
+    surfaces: dict[str, np.ndarray] = {}  # faithful: upward surface samples per placed object (remedy onto)
     world_cm = BulletWorld(sim, cache_dir) if params.settle else contextlib.nullcontext()
     with world_cm as world:
         if params.settle:
@@ -188,6 +189,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             if fp.enabled:
                 t0 = time.perf_counter()
                 info = _faithful_info(scene, oid, obj, proxies.get(oid), graph, poses)
+                info["surfaces"] = lambda names: _surfaces(scene, poses, names, pp.seed, surfaces)
+                info.update(input=initial, planes=[q for q in scene.structure if q.kind == "wall"])
                 carrier = next((q for q in info["below"] if q in poses), None)
                 if fp.carry and carrier is not None:
                     pose = fa.carried(pose, info["com"], np.asarray(scene.get(carrier).pose, float), poses[carrier])
@@ -347,18 +350,31 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
     normals = fa.resting_normals(hull.vertices) if flushable else np.zeros((0, 3))
     leaning_ids = [e.source for e in edges if e.relation == "leans_on"]
     return {"parents": parents, "below": below, "leaning": leaning_ids, "up": up, "normals": normals, "com": com,
-            "flushable": flushable, "flush_angle": 0.0, "diag": float(np.linalg.norm(mesh.extents) * scale)}
+            "flushable": flushable, "flush_angle": 0.0, "diag": float(np.linalg.norm(mesh.extents) * scale),
+            "placed": list(poses)}
+
+
+def _surfaces(scene: Scene, poses: dict[str, np.ndarray], names: list[str], seed: int,
+              cache: dict[str, np.ndarray]) -> np.ndarray:
+    """Upward surface samples (k, 3) of the placed objects ``names`` at their grounded poses (cached per id)."""
+    for q in names:
+        if q not in cache:
+            cache[q] = fa.upward_samples(scene.get(q).mesh().copy().apply_transform(poses[q]), fa.ONTO_SAMPLES,
+                                         seed)
+    parts = [cache[q] for q in names]
+    return np.vstack(parts) if parts else np.zeros((0, 3))
 
 
 def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: SimSettings, sp: SettleParams,
                      fp: FaithfulParams, info: dict, rec: dict) -> np.ndarray:
     """Guarded settling (see :mod:`phiscene.assembly.faithful`); fills ``rec``; returns the frozen pose.
 
-    Every start (the corrected pose, then the nearest resting poses, then a damped run, then horizontal shifts
-    when every start so far went farther than ``max_shift`` or lost its supporters) is lowered onto what lies
-    beneath and settled with the paper's settling; the first result within the slide/turn bounds that keeps the
-    graph's supporters is taken, else the closest settled one that stayed in place, else the closest. The final
-    pose is always the outcome of free settling, so it is as stable as the paper's.
+    Every start (the corrected pose, then the nearest resting poses, then a damped run, then the pose moved
+    onto the nearest supporting surface, then horizontal shifts when every start so far went farther than
+    ``max_shift`` or lost its supporters) is lowered onto what lies beneath and settled with the paper's
+    settling; the first result within the slide/drop/turn bounds that keeps the graph's supporters is taken,
+    else the closest settled one that stayed in place (on its supporters if one did), else the closest. The
+    final pose is always the outcome of free settling, so it is as stable as the paper's.
     """
     from phiscene.inertia import rigid_props
 
@@ -374,7 +390,10 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
     def attempt(label: str, start: np.ndarray, damped: bool = False, origin: np.ndarray | None = None) -> dict:
         # origin: where the slide bound is measured from (a shifted start: the start itself)
         origin = pose if origin is None else origin
-        start = _lowered(world, oid, start, context, fp.contact_tol / 2)
+        lowered = _lowered(world, oid, start, context, fp.contact_tol / 2)
+        # lowered farther than onto_reach: nothing it could stand on was beneath it (beside its shelf); a fall
+        fell = float(start[2, 3] - lowered[2, 3]) if fp.onto_reach > 0 else 0.0
+        start = lowered
         world.set_pose(oid, start)
         frames = 0
         if damped:
@@ -386,11 +405,16 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
             world.set_pose(oid, first.pose)  # at rest; then normal settings decide whether it stays
         result = settle_object(world, oid, sp)
         frames += result.frames
-        ok, moved, turned = fa.within_bounds(origin, result.pose, info["com"], info["diag"], fp)
+        ok, moved, turned = fa.within_bounds(origin, result.pose, info["com"], info["diag"], fp, start=lowered)
+        if fell > fp.onto_reach:
+            ok, moved = False, max(moved, fell)
         near = touching()
         lost = fa.lost_supporters(info["below"], info["leaning"], near)
-        robust = True  # tested only where it decides acceptance: a settled result in place on its supporters
-        if result.settled and ok and not lost and fp.tilt_test > 0 and not info["leaning"]:  # leaning: friction
+        # in place: within the bounds, still leaning where it leans (the graph may name the wrong supporter
+        # from below: an object that rests where it was put, on something else, is in place all the same)
+        in_place = ok and not any(p in lost for p in info["leaning"])
+        robust = True  # tested only where it decides: a settled result in place
+        if result.settled and in_place and fp.tilt_test > 0 and not info["leaning"]:  # leaning: friction
             robust = holds_when_tilted(world, oid, fp.tilt_test, fp.tilt_frames, fp.joint_tol, fp.joint_tol_deg)
             frames += 4 * fp.tilt_frames
         whys = ["" if ok else f"moved {moved:.3f} m / {turned:.1f} deg",
@@ -399,8 +423,9 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         stayed = ok and not lost
         out = {"label": label, "result": result, "frames": frames,
                "ok": stayed and result.settled and robust, "lost": bool(lost), "robust": robust,
-               "stayed": stayed, "travel": moved if not lost else math.inf,
-               "cost": fa.closeness(pose, result.pose, info["com"], info["diag"]),
+               "stayed": stayed, "in_place": in_place, "travel": moved if not lost else math.inf,
+               "cost": fa.closeness(pose, result.pose, info["com"], info["diag"], start=lowered)
+               + (fell if fell > fp.onto_reach else 0.0),
                "why": "; ".join(w for w in whys if w), "touching": near}
         tried.append(out)
         return out
@@ -413,19 +438,31 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                 break
         if not any(t["ok"] for t in tried):
             attempt("damped", pose, damped=True)
+        if not any(t["ok"] or (t["in_place"] and t["result"].settled) for t in tried) and fp.onto_reach > 0:
+            # fell or slid off every time: its input is off its supporter (depth error); move it onto the
+            # nearest supporting surface of any placed object (the graph may name the wrong supporter)
+            names = [q for q in info["placed"] if q in world.bodies]
+            # from where the input put it: carried by a supporter the graph got wrong, it may have gone far
+            here = pose.copy()
+            here[:3, 3] += fa.com_world(info["input"], info["com"]) - fa.com_world(pose, info["com"])
+            points = transform_points(here, np.vstack(proxy.hulls))
+            onto = fa.onto_start(here, info["com"], points, info["surfaces"](names), fp.onto_reach,
+                                 fp.contact_tol / 2, info["planes"])
+            if onto is not None and onto[1] > 1e-3:
+                attempt(f"onto {onto[1]:.3f} m", onto[0], origin=onto[0])
         travelled = min(t["travel"] for t in tried)
-        if travelled > fp.max_shift:  # every start went far (fell, lost its supporters): one nearby may hold
+        if travelled > fp.max_shift and not any(t["ok"] for t in tried):  # every start went far: one nearby
             step = min(fp.max_slide, fp.max_slide_frac * info["diag"])
             for r, ring in fa.shifted_starts(pose, step, fp.max_shift, fp.shift_directions):
                 # nearest ring first; stop at an accepted start, or after a ring
                 done = [attempt(f"shifted {r:.3f} m", s, origin=s) for s in ring]  # where one rests in place
-                if any(t["ok"] for t in done) or any(t["stayed"] and t["result"].settled for t in done):
+                if any(t["ok"] for t in done) or any(t["in_place"] and t["result"].settled for t in done):
                     break
     ok = [t for t in tried if t["ok"]]
-    # else: a settled result first, then one that stayed in place on its supporters, then one that holds when
-    # tilted, then the closest to the corrected input
-    best = ok[0] if ok else min(tried, key=lambda t: (not t["result"].settled, not t["stayed"], not t["robust"],
-                                                      t["cost"]))
+    # else: a settled result first, then one that stayed in place, then one on its supporters, then one that
+    # holds when tilted, then the closest to the corrected input
+    best = ok[0] if ok else min(tried, key=lambda t: (not t["result"].settled, not t["in_place"], not t["stayed"],
+                                                      not t["robust"], t["cost"]))
     result = best["result"]
     if not best["ok"]:
         remedy = "closest"

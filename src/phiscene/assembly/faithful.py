@@ -23,21 +23,27 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    touches whatever lies beneath (never through it), then settled with the
    paper's settling. A result is accepted when it met the settling criterion,
    stays when gravity tilts by ``tilt_test`` degrees (no balancing on an edge),
-   its centre of mass moved (horizontally) at most the bound (``max_slide`` or
-   ``max_slide_frac`` of the bounding-box diagonal, the smaller), it turned at
+   its centre of mass moved horizontally at most the bound (``max_slide`` or
+   ``max_slide_frac`` of the bounding-box diagonal, the smaller) and fell at
+   most as much below its lowered start (an object that leaves its shelf for
+   the floor barely moves horizontally), it turned at
    most ``max_turn`` and it still touches a supporter the graph names. The
    starts, in order: the corrected pose (remedy ``none``, or the paper's
    ``extra_frames`` / ``damping``); the object's other resting poses within
    ``max_stable_angle``, nearest first, at most ``max_candidates`` of them
    (``stable``); a run with high damping and rolling friction whose resting
-   pose is then settled again at normal settings (``damped``); when every
+   pose is then settled again at normal settings (``damped``); when none of
+   these stayed in place, the pose moved onto the nearest upward-facing
+   surface of the objects placed before it within ``onto_reach`` (``onto``,
+   :func:`onto_start`: a depth error put it beside the shelf it stands on); when every
    start so far went farther than ``max_shift`` or lost its supporters (a jug
    whose base straddles a plate's rim tips over and rolls off the table), the
    corrected pose shifted horizontally in ``shift_directions`` directions by
    steps of the slide bound up to ``max_shift`` (``shifted``, nearest first;
    its slide is measured from the shifted start; the first that stays in place
    on its supporters ends the search). When none is accepted, the
-   settled result that stayed in place on its supporters, else one that holds
+   settled result that stayed in place (on its supporters if one did: the
+   graph may name the wrong one), else one that holds
    when tilted, closest to the corrected input (:func:`closeness`), is taken
    (``closest``),
    with the reasons in the certificate. The final pose is always the outcome
@@ -64,6 +70,9 @@ from phiscene.transforms import decompose, make_pose, rotation_angle, transform_
 
 #: Relations whose parent carries the object from below (its surface normal matters for flushing).
 BELOW = ("supports", "contains")
+
+#: Upward surface samples per placed object for the remedy ``onto`` (:func:`upward_samples`).
+ONTO_SAMPLES = 3000
 
 
 @dataclass(frozen=True)
@@ -119,6 +128,11 @@ class FaithfulParams(Params):
         distance, nearest first (0 = off).
     shift_directions
         Directions per shift distance (evenly spaced, the first along +x).
+    onto_reach
+        Remedy ``onto``: an object that fell or slid off from every start so far is moved onto the nearest
+        upward-facing surface of the objects placed before it within this distance (m) of its bottom
+        (:func:`onto_start`; 0 = off). A start that had to be lowered farther than this before it touched
+        anything fell: it is not in place.
     """
 
     _label = "faithful parameters"
@@ -143,13 +157,14 @@ class FaithfulParams(Params):
     retry_rolling_friction: float = 0.1
     max_shift: float = 0.09
     shift_directions: int = 6
+    onto_reach: float = 0.3
 
     def check(self) -> None:
         """Reject negative bounds and ``retry_damping`` outside [0, 1) (``ValueError``)."""
         for key in ("max_flush_angle", "max_stable_angle", "max_candidates", "tilt_test", "tilt_frames",
                     "joint_settle_frames", "joint_frames", "joint_tol", "joint_tol_deg", "max_slide",
                     "max_slide_frac", "max_turn", "contact_tol", "retry_rolling_friction", "max_shift",
-                    "shift_directions"):
+                    "shift_directions", "onto_reach"):
             if getattr(self, key) < 0:
                 raise ValueError(f"faithful parameter {key!r} must be >= 0, got {getattr(self, key)}")
         if not 0.0 <= self.retry_damping < 1.0:
@@ -348,30 +363,125 @@ def com_world(pose: np.ndarray, com_local: np.ndarray) -> np.ndarray:
     return transform_points(pose, np.asarray(com_local, dtype=float)[None])[0]
 
 
+def slide_bound(diag: float, fp: FaithfulParams) -> float:
+    """The slide (and drop) bound (m) of an object whose bounding-box diagonal is ``diag`` (m)."""
+    return min(fp.max_slide, fp.max_slide_frac * diag)
+
+
+def drop(start: np.ndarray, after: np.ndarray, com_local: np.ndarray) -> float:
+    """How far (m) the centre of mass fell from ``start`` (the lowered start, poses (4, 4)); 0 when it rose."""
+    return max(0.0, float(com_world(start, com_local)[2] - com_world(after, com_local)[2]))
+
+
 def within_bounds(before: np.ndarray, after: np.ndarray, com_local: np.ndarray, diag: float,
-                  fp: FaithfulParams) -> tuple[bool, float, float]:
+                  fp: FaithfulParams, start: np.ndarray | None = None) -> tuple[bool, float, float]:
     """Whether settling from ``before`` to ``after`` (poses (4, 4)) stayed within the slide/turn bounds.
+
+    ``start`` is where settling began, lowered onto what lies beneath (default ``before``): from there the
+    centre of mass may fall at most the slide bound too. An object that leaves its shelf and lands on the
+    floor below barely moves horizontally; the fall is what gives it away.
 
     Returns
     -------
-    ok, moved (m, horizontal centre-of-mass displacement), turned (deg)
+    ok, moved (m, the larger of the horizontal centre-of-mass displacement from ``before`` and the fall from
+    ``start``), turned (deg)
     """
     step = com_world(after, com_local) - com_world(before, com_local)
-    moved = float(np.linalg.norm(step[:2]))  # sliding/rolling; the vertical drop onto the supporter is free
+    slid = float(np.linalg.norm(step[:2]))  # sliding/rolling; the drop onto the supporter (lowering) is free
+    moved = max(slid, drop(before if start is None else start, after, com_local))
     turned = math.degrees(rotation_angle(decompose(before)[0], decompose(after)[0]))
-    bound = min(fp.max_slide, fp.max_slide_frac * diag)
-    return moved <= bound and turned <= fp.max_turn, moved, turned
+    return moved <= slide_bound(diag, fp) and turned <= fp.max_turn, moved, turned
 
 
-def closeness(reference: np.ndarray, result: np.ndarray, com_local: np.ndarray, diag: float) -> float:
+def closeness(reference: np.ndarray, result: np.ndarray, com_local: np.ndarray, diag: float,
+              start: np.ndarray | None = None) -> float:
     """How far settling took an object from ``reference`` (m): horizontal centre-of-mass shift plus the arc its
-    rotation sweeps at half the bounding-box diagonal (``diag`` / 2 times the angle in rad).
-
-    The vertical drop onto a supporter is free, as in :func:`within_bounds`.
+    rotation sweeps at half the bounding-box diagonal (``diag`` / 2 times the angle in rad), plus how far it fell
+    from ``start`` (the lowered start, when given; the drop onto a supporter is free, as in
+    :func:`within_bounds`).
     """
     step = com_world(result, com_local) - com_world(reference, com_local)
     turned = rotation_angle(decompose(reference)[0], decompose(result)[0])
-    return float(np.linalg.norm(step[:2]) + 0.5 * diag * turned)
+    fell = drop(start, result, com_local) if start is not None else 0.0
+    return float(np.linalg.norm(step[:2]) + 0.5 * diag * turned + fell)
+
+
+def upward_samples(mesh_world, n: int, seed: int, min_normal_z: float = 0.8) -> np.ndarray:
+    """Points (k, 3) sampled (area-weighted, seeded) on the upward-facing faces of a world-frame mesh.
+
+    Faces whose unit normal has a z component below ``min_normal_z`` (walls, undersides, steep slopes) are
+    left out; ``k`` is 0 when none faces up.
+    """
+    import trimesh
+
+    faces = np.flatnonzero(np.asarray(mesh_world.face_normals)[:, 2] >= min_normal_z)
+    if len(faces) == 0 or n <= 0:
+        return np.zeros((0, 3))
+    sub = mesh_world.submesh([faces], append=True)
+    pts, _ = trimesh.sample.sample_surface(sub, n, seed=seed)
+    return np.asarray(pts, dtype=float)
+
+
+def onto_start(pose: np.ndarray, com_local: np.ndarray, points_world: np.ndarray, surfaces: np.ndarray,
+               reach: float, clearance: float, planes=()) -> tuple[np.ndarray, float] | None:
+    """``pose`` moved onto the nearest supporting surface: over it, inside its edge, just above it.
+
+    An object carried from below whose input is off its supporter (a vase beside the wall shelf it stands on,
+    a can hanging over the board's edge: the depth error of a single image) falls when released. Its
+    supporter's top is found as the upward-facing surface point nearest to the bottom of the object (within
+    ``reach`` m); the object is moved horizontally so that its centre of mass lies over that surface, pulled
+    inward from the surface's edge by about its footprint radius (mean-shift steps over the samples of the same
+    level), and vertically so that its lowest point is ``clearance`` m above the surface.
+
+    Parameters
+    ----------
+    pose : (4, 4) float
+        The corrected pose.
+    com_local : (3,) float
+        Centre of mass, local frame.
+    points_world : (n, 3) float
+        The object's collision-shape points under ``pose``.
+    surfaces : (k, 3) float
+        Upward surface samples of the candidate supporters (:func:`upward_samples`).
+    reach
+        Largest distance (m) between the object's bottom and the surface.
+    clearance
+        Gap left under the object (m).
+    planes
+        Walls (:class:`~phiscene.scene.Plane`): surface points closer to one than the object's footprint radius
+        are left out (the object would stand in the wall).
+
+    Returns
+    -------
+    (pose (4, 4), horizontal shift in m), or ``None`` when no surface is within reach.
+    """
+    pts = np.asarray(points_world, dtype=float)
+    # mean-shift kernel: 1.5 footprint radii, so that the footprint ends clear of the edge (the shift converges
+    # slowly near the kernel radius)
+    radius = max(0.75 * float(np.max(np.ptp(pts[:, :2], axis=0))), 1e-3)
+    surfaces = np.asarray(surfaces, dtype=float).reshape(-1, 3)
+    for plane in planes:
+        surfaces = surfaces[plane.signed_distance(surfaces) >= radius / 1.5]
+    if len(surfaces) == 0:
+        return None
+    c = com_world(pose, com_local)
+    low = float(pts[:, 2].min())
+    bottom = np.array([c[0], c[1], low])
+    d = np.linalg.norm(surfaces - bottom, axis=1)
+    k = int(np.argmin(d))
+    if d[k] > reach:
+        return None
+    level = surfaces[np.abs(surfaces[:, 2] - surfaces[k, 2]) <= 0.01]
+    target = surfaces[k, :2].copy()
+    for _ in range(10):  # mean shift: away from the edge, towards where the surface lies around the point
+        near = level[np.linalg.norm(level[:, :2] - target, axis=1) <= radius]
+        if len(near) == 0:
+            break
+        target = near[:, :2].mean(axis=0)
+    out = np.array(pose, dtype=float, copy=True)
+    out[:2, 3] += target - c[:2]
+    out[2, 3] += surfaces[k, 2] + clearance - low
+    return out, float(np.linalg.norm(target - c[:2]))
 
 
 def lost_supporters(below: list[str], leaning: list[str], touching: list[str]) -> list[str]:
