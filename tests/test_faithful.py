@@ -323,3 +323,28 @@ def test_box_beside_a_wall_shelf_is_moved_onto_it(work, faithful):
     assert abs(lo[2] - 1.02) < 0.005  # resting on the board's top
     assert hi[0] <= 0.15 + 1e-3  # wholly over the board (its footprint pulled inside the edge)
     assert np.linalg.norm(out.get("box").pose[:2, 3] - pose[:2, 3]) < 0.15  # moved across, not far
+
+
+def test_onto_start_centres_the_footprint_inside_the_edge_clear_of_walls():
+    from phiscene.assembly.faithful import onto_start
+    from phiscene.scene import Plane
+
+    # a level 0.3 m square surface at z = 1.02 (a regular grid of samples); a 10 cm cube whose centre is 6 cm beyond
+    # its edge (x = 0.15), its bottom 1 mm above the surface's height
+    g = np.linspace(-0.15, 0.15, 61)
+    surface = np.array([(x, y, 1.02) for x in g for y in g])
+    cube = trimesh.creation.box((0.1, 0.1, 0.1))
+    pose = make_pose(translation=(0.21, 0.0, 1.071))
+    pts = trimesh.transform_points(cube.vertices, pose)
+    out, shift = onto_start(pose, np.zeros(3), pts, surface, reach=0.3, clearance=0.002)
+    moved = trimesh.transform_points(cube.vertices, out)
+    assert moved[:, 2].min() == pytest.approx(1.022, abs=1e-9)  # just above the surface
+    assert moved[:, 0].max() <= 0.15 and out[0, 3] >= 0.0  # the whole footprint over it, not past its middle
+    assert abs(out[1, 3]) < 0.005 and shift == pytest.approx(0.21 - out[0, 3], abs=1e-6)  # straight inwards
+    # a wall at y = 0.03 (room on y < 0.03): the cube ends at least its footprint radius from it
+    wall = Plane(id="wall_0", kind="wall", normal=(0.0, -1.0, 0.0), offset=0.03)
+    out, _ = onto_start(pose, np.zeros(3), pts, surface, 0.3, 0.002, planes=[wall])
+    assert trimesh.transform_points(cube.vertices, out)[:, 1].max() <= 0.03
+    # nothing within reach: no start
+    high = make_pose(translation=(0.21, 0.0, 1.6))
+    assert onto_start(high, np.zeros(3), trimesh.transform_points(cube.vertices, high), surface, 0.3, 0.002) is None
