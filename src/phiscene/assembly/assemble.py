@@ -190,7 +190,6 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                 t0 = time.perf_counter()
                 info = _faithful_info(scene, oid, obj, proxies.get(oid), graph, poses)
                 info["surfaces"] = lambda names: _surfaces(scene, poses, names, pp.seed, surfaces)
-                info.update(input=initial, planes=[q for q in scene.structure if q.kind == "wall"])
                 carrier = next((q for q in info["below"] if q in poses), None)
                 if fp.carry and carrier is not None:
                     pose = fa.carried(pose, info["com"], np.asarray(scene.get(carrier).pose, float), poses[carrier])
@@ -351,7 +350,8 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
     leaning_ids = [e.source for e in edges if e.relation == "leans_on"]
     return {"parents": parents, "below": below, "leaning": leaning_ids, "up": up, "normals": normals, "com": com,
             "flushable": flushable, "flush_angle": 0.0, "diag": float(np.linalg.norm(mesh.extents) * scale),
-            "placed": list(poses)}
+            "placed": list(poses), "input": np.asarray(obj.pose, dtype=float),
+            "walls": [q for q in scene.structure if q.kind == "wall"]}
 
 
 def _surfaces(scene: Scene, poses: dict[str, np.ndarray], names: list[str], seed: int,
@@ -392,7 +392,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         origin = pose if origin is None else origin
         lowered = _lowered(world, oid, start, context, fp.contact_tol / 2)
         # lowered farther than onto_reach: nothing it could stand on was beneath it (beside its shelf); a fall
-        fell = float(start[2, 3] - lowered[2, 3]) if fp.onto_reach > 0 else 0.0
+        fell = float(start[2, 3] - lowered[2, 3])
+        fell = fell if 0 < fp.onto_reach < fell else 0.0
         start = lowered
         world.set_pose(oid, start)
         frames = 0
@@ -406,7 +407,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         result = settle_object(world, oid, sp)
         frames += result.frames
         ok, moved, turned = fa.within_bounds(origin, result.pose, info["com"], info["diag"], fp, start=lowered)
-        if fell > fp.onto_reach:
+        if fell:
             ok, moved = False, max(moved, fell)
         near = touching()
         lost = fa.lost_supporters(info["below"], info["leaning"], near)
@@ -424,8 +425,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         out = {"label": label, "result": result, "frames": frames,
                "ok": stayed and result.settled and robust, "lost": bool(lost), "robust": robust,
                "stayed": stayed, "in_place": in_place, "travel": moved if not lost else math.inf,
-               "cost": fa.closeness(pose, result.pose, info["com"], info["diag"], start=lowered)
-               + (fell if fell > fp.onto_reach else 0.0),
+               "cost": fa.closeness(pose, result.pose, info["com"], info["diag"], start=lowered) + fell,
                "why": "; ".join(w for w in whys if w), "touching": near}
         tried.append(out)
         return out
@@ -441,18 +441,17 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         if not any(t["ok"] or (t["in_place"] and t["result"].settled) for t in tried) and fp.onto_reach > 0:
             # fell or slid off every time: its input is off its supporter (depth error); move it onto the
             # nearest supporting surface of any placed object (the graph may name the wrong supporter)
-            names = [q for q in info["placed"] if q in world.bodies]
             # from where the input put it: carried by a supporter the graph got wrong, it may have gone far
             here = pose.copy()
             here[:3, 3] += fa.com_world(info["input"], info["com"]) - fa.com_world(pose, info["com"])
             points = transform_points(here, np.vstack(proxy.hulls))
-            onto = fa.onto_start(here, info["com"], points, info["surfaces"](names), fp.onto_reach,
-                                 fp.contact_tol / 2, info["planes"])
+            onto = fa.onto_start(here, info["com"], points, info["surfaces"](info["placed"]), fp.onto_reach,
+                                 fp.contact_tol / 2, info["walls"])
             if onto is not None and onto[1] > 1e-3:
                 attempt(f"onto {onto[1]:.3f} m", onto[0], origin=onto[0])
         travelled = min(t["travel"] for t in tried)
         if travelled > fp.max_shift and not any(t["ok"] for t in tried):  # every start went far: one nearby
-            step = min(fp.max_slide, fp.max_slide_frac * info["diag"])
+            step = fa.slide_bound(info["diag"], fp)
             for r, ring in fa.shifted_starts(pose, step, fp.max_shift, fp.shift_directions):
                 # nearest ring first; stop at an accepted start, or after a ring
                 done = [attempt(f"shifted {r:.3f} m", s, origin=s) for s in ring]  # where one rests in place

@@ -456,12 +456,13 @@ def onto_start(pose: np.ndarray, com_local: np.ndarray, points_world: np.ndarray
     (pose (4, 4), horizontal shift in m), or ``None`` when no surface is within reach.
     """
     pts = np.asarray(points_world, dtype=float)
+    footprint = max(0.5 * float(np.max(np.ptp(pts[:, :2], axis=0))), 1e-3 / 1.5)  # footprint radius
     # mean-shift kernel: 1.5 footprint radii, so that the footprint ends clear of the edge (the shift converges
     # slowly near the kernel radius)
-    radius = max(0.75 * float(np.max(np.ptp(pts[:, :2], axis=0))), 1e-3)
+    radius = 1.5 * footprint
     surfaces = np.asarray(surfaces, dtype=float).reshape(-1, 3)
     for plane in planes:
-        surfaces = surfaces[plane.signed_distance(surfaces) >= radius / 1.5]
+        surfaces = surfaces[plane.signed_distance(surfaces) >= footprint]
     if len(surfaces) == 0:
         return None
     c = com_world(pose, com_local)
