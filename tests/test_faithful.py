@@ -348,3 +348,75 @@ def test_onto_start_centres_the_footprint_inside_the_edge_clear_of_walls():
     # nothing within reach: no start
     high = make_pose(translation=(0.21, 0.0, 1.6))
     assert onto_start(high, np.zeros(3), trimesh.transform_points(cube.vertices, high), surface, 0.3, 0.002) is None
+
+
+def test_flush_attached_makes_a_tilted_wall_shelf_level_and_puts_its_back_on_the_wall():
+    from phiscene.assembly.faithful import flush_attached
+
+    # a shelf board 0.6 x 0.18 x 0.03 m fixed to the wall y = 0 (room on y < 0), input tilted 8 deg about x and
+    # 3 deg about y and pushed 2 cm into the wall, as a rotation and depth error of the input do
+    board = trimesh.creation.box((0.6, 0.18, 0.03))
+    R = Rotation.from_euler("xy", [8.0, 3.0], degrees=True).as_matrix()
+    pose = make_pose(R, (0.0, -0.09 + 0.02, 1.0))
+    wall = np.array([0.0, -1.0, 0.0])
+    out, angle, shift = flush_attached(pose, resting_normals(board.vertices), np.zeros(3), board.vertices,
+                                       wall, 0.0, True, 20.0)
+    Rout = decompose(out)[0]
+    assert np.allclose(np.abs(Rout), np.eye(3), atol=1e-9)  # every face axis-aligned: top level, back on the wall
+    assert trimesh.transform_points(board.vertices, out)[:, 1].max() == pytest.approx(0.0, abs=1e-9)
+    # the rotation undone is the input's (8 and 3 deg about two axes), about the centre, which was 2 cm too deep:
+    # the board moved 2 cm out of the wall, along the wall's normal
+    assert angle == pytest.approx(math.degrees(Rotation.from_matrix(R).magnitude()), abs=1e-6)
+    assert shift == pytest.approx(0.02, abs=1e-9)
+    assert np.allclose(out[:3, 3], (0.0, -0.09, 1.0), atol=1e-9)
+
+
+def test_flush_attached_on_a_ceiling_keeps_the_heading_and_leaves_large_errors():
+    from phiscene.assembly.faithful import flush_attached
+
+    # a 0.3 x 0.3 x 0.05 m panel fixed to the ceiling z = 2.5 (normal -z, room below), tilted 6 deg, turned 30 deg
+    # about the vertical, its top 3 cm below the ceiling
+    panel = trimesh.creation.box((0.3, 0.3, 0.05))
+    yaw = Rotation.from_euler("z", 30.0, degrees=True)
+    R = (Rotation.from_euler("x", 6.0, degrees=True) * yaw).as_matrix()
+    pose = make_pose(R, (1.0, 1.0, 2.445))
+    ceiling = np.array([0.0, 0.0, -1.0])
+    normals = resting_normals(panel.vertices)
+    out, angle, shift = flush_attached(pose, normals, np.zeros(3), panel.vertices, ceiling, 2.5, False, 20.0)
+    Rout = decompose(out)[0]
+    assert Rout[:, 2] @ [0, 0, 1] == pytest.approx(1.0, abs=1e-12)  # top flush with the ceiling
+    assert angle == pytest.approx(6.0, abs=1e-6)  # the smallest rotation: the tilt only, the heading kept
+    assert trimesh.transform_points(panel.vertices, out)[:, 2].max() == pytest.approx(2.5, abs=1e-9)
+    # tilted 30 deg (more than max_flush_angle) and 20 cm below (more than the reach): left as it is
+    far = make_pose(Rotation.from_euler("x", 30.0, degrees=True).as_matrix(), (1.0, 1.0, 2.2))
+    out, angle, shift = flush_attached(far, normals, np.zeros(3), panel.vertices, ceiling, 2.5, False, 20.0)
+    assert np.allclose(out, far) and angle == 0.0 and shift == 0.0
+
+
+@pytest.mark.parametrize("faithful", [True, False])
+def test_a_tilted_wall_shelf_is_made_flush_and_what_stands_on_it_level(work, faithful):
+    from phiscene.scene import Plane
+
+    # a board fixed to the wall x = -0.15 (room on x > -0.15), its input tilted 12 deg so that its top slopes down
+    # away from the wall, a box resting on it tilted with it: faithful grounding levels the board against its wall
+    # and the box ends level on it; the paper's loop keeps the attached board exactly where the input put it
+    tilt = Rotation.from_euler("y", 12.0, degrees=True).as_matrix()
+    board = make_pose(tilt, (0.0, 0.0, 1.0))
+    top = trimesh.transform_points([[0.0, 0.0, 0.02]], board)[0]
+    box = make_pose(tilt, top + tilt @ [0.0, 0.0, 0.051])
+    scene = scene_of(work, {"slab": ("slab", board), "box": ("box", box)})
+    scene.structure = [Plane("wall_0", "wall", (1.0, 0.0, 0.0), 0.15)]
+    g = graph_of(scene, [("slab", "box", "supports")])
+    out, rec = run(work, scene, g, params={"faithful": {"enabled": faithful}}, attached={"slab": "wall_0"})
+    if not faithful:
+        assert np.allclose(out.get("slab").pose, board)
+        return
+    R = decompose(out.get("slab").pose)[0]
+    assert math.degrees(math.acos(min(1.0, R[:, 2] @ [0, 0, 1]))) < 1e-6  # the board's top is level
+    assert rec["objects"]["slab"]["flush_angle"] == pytest.approx(12.0, abs=1e-6)
+    assert out.get("slab").world_mesh().bounds[0, 0] == pytest.approx(-0.15, abs=1e-9)  # back on the wall
+    Rb = decompose(out.get("box").pose)[0]
+    assert math.degrees(math.acos(min(1.0, Rb[:, 2] @ [0, 0, 1]))) < 0.5  # the box stands level on it
+    lo, _ = out.get("box").world_mesh().bounds
+    cert = rec["objects"]["box"]["certificate"]
+    assert cert["settled"] and cert["supporters_kept"] and lo[2] > 1.0  # on the board, not on the floor

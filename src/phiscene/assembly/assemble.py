@@ -175,7 +175,12 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             rec: dict = {"index": index, "seconds": {}}
 
             if oid in attached:
+                if params.faithful.enabled and params.faithful.flush:
+                    pose = _flush_attached(scene, oid, obj, proxies.get(oid), attached[oid],
+                                           params.faithful.max_flush_angle, rec)
                 _fix(world if params.settle else None, oid, obj.mesh(), proxies.get(oid), pose, sim, rec)
+                total, turned = window_motion(initial, pose)
+                rec.update(displacement=_round(total), rotation_change=_round(turned))
                 poses[oid] = pose
                 if params.penetration:
                     placed.append(sdf_body(oid, obj.mesh(), pose, pp.n_context, pp, cache_dir))
@@ -264,8 +269,29 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     return _with_attached(scene.with_poses(poses), attached), record
 
 
+def _flush_attached(scene: Scene, oid: str, obj, proxy: Proxy | None, holder: str, max_angle_deg: float,
+                    rec: dict) -> np.ndarray:
+    """The pose (4, 4) of an attached object made flush with the wall or ceiling holding it
+    (:func:`~phiscene.assembly.faithful.flush_attached`); its input pose when the holder is not a plane of
+    ``scene.structure`` (the ground stands for an unknown wall). Fills ``rec`` (``flush_angle`` deg,
+    ``attach_shift`` m)."""
+    import trimesh
+
+    pose = np.asarray(obj.pose, dtype=float)
+    plane = next((q for q in scene.structure if q.id == holder), None)
+    if plane is None:
+        return pose
+    points = np.vstack(proxy.hulls) if proxy is not None and proxy.hulls else np.asarray(obj.mesh().vertices)
+    hull = trimesh.convex.convex_hull(points)
+    out, angle, shift = fa.flush_attached(pose, fa.resting_normals(hull.vertices), np.asarray(hull.center_mass),
+                                          hull.vertices, np.asarray(plane.normal, dtype=float), plane.offset,
+                                          plane.kind == "wall", max_angle_deg)
+    rec.update(flush_angle=_round(angle), attach_shift=_round(shift))
+    return out
+
+
 def _fix(world, oid: str, mesh, proxy: Proxy | None, pose: np.ndarray, sim: SimSettings, rec: dict) -> None:
-    """An attached object: a static collider at its input pose (when settling); fills ``rec``."""
+    """An attached object: a static collider at ``pose`` (when settling); fills ``rec``."""
     from phiscene.inertia import rigid_props
 
     if world is not None:
@@ -273,8 +299,7 @@ def _fix(world, oid: str, mesh, proxy: Proxy | None, pose: np.ndarray, sim: SimS
         world.set_static(oid)
     rec.update(sdf_iterations=0, sdf_initial_loss=None, sdf_final_loss=None, sdf_translation=[0.0, 0.0, 0.0],
                sdf_context=[], sdf_grid_error=None, settle_frames=0, settled=True, settle_remedy="attached",
-               residual_translation=0.0, residual_rotation=0.0, settle_translation=0.0, settle_rotation=0.0,
-               displacement=0.0, rotation_change=0.0)
+               residual_translation=0.0, residual_rotation=0.0, settle_translation=0.0, settle_rotation=0.0)
 
 
 def _resolve(oid: str, mesh, pose: np.ndarray, placed: list[SdfBody], ground_height: float,

@@ -14,6 +14,9 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    most ``max_flush_angle``. Small orientation errors are corrected, large
    ones (a plank leaning on purpose) are left alone. Objects with a
    ``leans_on`` parent are never flushed.
+   An object attached to a wall or the ceiling stays static where it is fixed, but is first made flush with
+   its plane, upright on a wall and touching it (:func:`flush_attached`): a wall shelf tilted by a rotation
+   error of the input would hold nothing.
 2. **Carried**. An object supported from below first moves with its
    supporter (``carry``, :func:`carried`): it is translated as the point of
    the supporter under its centre of mass moved, so it stays over the same
@@ -74,6 +77,10 @@ BELOW = ("supports", "contains")
 #: Upward surface samples per placed object for the remedy ``onto`` (:func:`upward_samples`).
 ONTO_SAMPLES = 3000
 
+#: An attached object is moved onto the wall or ceiling it is fixed to when its back is at most this far (m) from
+#: it, in front or behind (:func:`flush_attached`); farther, the plane estimate is taken as wrong there.
+ATTACH_REACH = 0.1
+
 
 @dataclass(frozen=True)
 class FaithfulParams(Params):
@@ -84,7 +91,8 @@ class FaithfulParams(Params):
     enabled
         Run flush correction, guarded settling and the retry remedies.
     flush
-        Rotate each object onto its nearest stable resting facet, flush with its supporters.
+        Rotate each object onto its nearest stable resting facet, flush with its supporters; an attached object
+        flush with, upright on and touching the wall or ceiling it is fixed to (:func:`flush_attached`).
     max_flush_angle
         Largest flush rotation applied (deg); larger tilts are taken as intended.
     max_slide
@@ -301,6 +309,84 @@ def flush_pose(pose: np.ndarray, normals_local: np.ndarray, com_local: np.ndarra
     """
     candidates = resting_candidates(pose, normals_local, com_local, up, max_angle_deg)
     return candidates[0] if candidates else (pose, 0.0)
+
+
+def flush_attached(pose: np.ndarray, normals_local: np.ndarray, com_local: np.ndarray, hull_local: np.ndarray,
+                   normal: np.ndarray, offset: float, wall: bool, max_angle_deg: float,
+                   reach: float = ATTACH_REACH) -> tuple[np.ndarray, float, float]:
+    """An object fixed to a wall or the ceiling made flush with it, upright, and touching it.
+
+    A poster, a shelf or a clock is fixed with one face against its plane; a rotation error of the input tilts
+    that face (and a shelf's top with it, so that nothing can stand on it) and a depth error pushes it into the
+    plane or off it. Three steps, each about the centre of mass and each only when small:
+
+    1. the resting facet of its hull nearest to facing the plane is made to face it exactly (smallest
+       rotation; skipped beyond ``max_angle_deg``);
+    2. on a wall only: a rotation about the wall normal makes the facet nearest to facing down, among those
+       roughly perpendicular to the wall, face straight down within the wall's plane (upright; skipped beyond
+       ``max_angle_deg``); a ceiling leaves the turn about the vertical free;
+    3. a translation along the normal puts its hull's farthest point behind or nearest point in front exactly on
+       the plane, when that is at most ``reach`` away.
+
+    Parameters
+    ----------
+    pose : (4, 4) float
+        Input pose (uniform scale allowed).
+    normals_local : (k, 3) float
+        Resting facet normals of the hull (:func:`resting_normals`), local frame.
+    com_local : (3,) float
+        Centre of mass, local frame.
+    hull_local : (n, 3) float
+        Points of the collision shape, local frame.
+    normal : (3,) float
+        The plane's unit normal, pointing into the room.
+    offset
+        The plane's offset (points ``p`` on it: ``normal . p + offset = 0``).
+    wall
+        The plane is a wall (step 2 applies).
+    max_angle_deg
+        Largest rotation of steps 1 and 2 (deg).
+    reach
+        Largest translation of step 3 (m).
+
+    Returns
+    -------
+    pose : (4, 4) float
+        The corrected pose.
+    angle
+        Rotation applied, steps 1 and 2 together (deg).
+    shift
+        Signed translation along ``normal`` (m; positive: away from the plane).
+    """
+    n = np.asarray(normal, dtype=float)
+    n = n / np.linalg.norm(n)
+    out = np.array(pose, dtype=float, copy=True)
+    candidates = resting_candidates(out, normals_local, com_local, n, max_angle_deg)
+    if candidates:
+        out = candidates[0][0]
+    R, t, s = decompose(out)
+    if wall and len(normals_local):
+        down = np.array([0.0, 0.0, -1.0]) - (np.array([0.0, 0.0, -1.0]) @ n) * n
+        world = normals_local @ R.T
+        world = world / np.linalg.norm(world, axis=1, keepdims=True)
+        side = world[np.abs(world @ n) < 0.5]
+        if np.linalg.norm(down) > 1e-9 and len(side):
+            down = down / np.linalg.norm(down)
+            proj = side - np.outer(side @ n, n)
+            proj = proj / np.maximum(np.linalg.norm(proj, axis=1, keepdims=True), 1e-12)
+            k = int(np.argmax(proj @ down))
+            angle = math.atan2(float(np.cross(proj[k], down) @ n), float(np.clip(proj[k] @ down, -1.0, 1.0)))
+            if abs(math.degrees(angle)) <= max_angle_deg:
+                from scipy.spatial.transform import Rotation
+
+                Q = Rotation.from_rotvec(n * angle).as_matrix()
+                c = com_world(out, com_local)
+                out = make_pose(Q @ R, c - Q @ (c - t), s)
+    turned = math.degrees(rotation_angle(decompose(pose)[0], decompose(out)[0]))
+    gap = float((transform_points(out, np.asarray(hull_local, dtype=float)) @ n + offset).min())
+    shift = -gap if abs(gap) <= reach else 0.0
+    out[:3, 3] += shift * n
+    return out, turned, shift
 
 
 def shifted_starts(pose: np.ndarray, step: float, max_shift: float,
