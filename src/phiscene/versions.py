@@ -8,7 +8,7 @@ bumping one here after a behaviour change reruns exactly the affected jobs
 BENCHMARK = 2
 PROXIES = 1
 TOPOLOGY = 1
-GROUND = 1
+GROUND = 2
 METRICS = 2
 TABLES = 2
 REPORT = 1
