@@ -143,6 +143,29 @@ def test_column_straddling_a_step_is_shifted_to_stand(work, max_shift):
     assert cert["joint_stable"]
 
 
+@pytest.mark.parametrize("onto_reach", [0.3, 0.0])
+def test_column_balanced_on_an_edge_is_moved_inside_it(work, onto_reach):
+    # the 0.3 m column stands on the slab with its centre of mass 4 mm inside the edge (x = 0.15): it settles, but
+    # it would topple at a tilt of atan(4/150) = 1.5 deg, less than the 4 deg tilt test (marginal). With the remedy
+    # onto it is moved inside the edge and stands with a margin of more than 150 tan(4 deg) = 10.5 mm.
+    slab = make_pose(translation=(0.0, 0.0, 0.02))
+    pose = make_pose(translation=(0.146, 0.0, 0.04 + 0.15 + 0.001))
+    scene = scene_of(work, {"slab": ("slab", slab), "column": ("column", pose)})
+    g = graph_of(scene, [("ground", "slab", "supports"), ("slab", "column", "supports")])
+    params = {"faithful": {"enabled": True, "max_shift": 0.0, "onto_reach": onto_reach}}
+    out, rec = run(work, scene, g, params=params)
+    R, t, _ = decompose(out.get("column").pose)
+    cert = rec["objects"]["column"]["certificate"]
+    if onto_reach == 0:  # nothing else moves it: the closest result, which only balances there
+        assert cert["remedy"] == "closest" and "marginal" in cert["reason"]
+        return
+    assert cert["remedy"].startswith("onto") and cert["settled"] and cert["supporters_kept"]
+    assert math.degrees(math.acos(min(1.0, R[2, 2]))) < 1.0  # standing
+    assert t[0] < 0.15 - 0.15 * math.tan(math.radians(4.0))  # inside the edge by the tilt test's margin
+    assert out.get("column").world_mesh().bounds[0, 2] == pytest.approx(0.04, abs=0.003)  # on the slab
+    assert np.linalg.norm(t[:2] - pose[:2, 3]) <= onto_reach
+
+
 def test_paper_loop_unchanged_without_faithful(work):
     pose = make_pose(translation=(0.0, 0.0, 0.2))
     scene = scene_of(work, {"box": ("box", pose)})

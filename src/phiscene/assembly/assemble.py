@@ -463,10 +463,12 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                 break
         if not any(t["ok"] for t in tried):
             attempt("damped", pose, damped=True)
-        if not any(t["ok"] or (t["in_place"] and t["result"].settled) for t in tried) and fp.onto_reach > 0:
-            # fell or slid off every time: its input is off its supporter (depth error); move it onto the
-            # nearest supporting surface of any placed object (the graph may name the wrong supporter)
-            # from where the input put it: carried by a supporter the graph got wrong, it may have gone far
+        if not any(t["ok"] or (t["in_place"] and t["result"].settled and t["robust"]) for t in tried) \
+                and fp.onto_reach > 0:
+            # fell or slid off every time, or only balances on an edge: its input is off its supporter or
+            # over its edge (depth error); move it onto the nearest supporting surface of any placed object,
+            # inside its edge (the graph may name the wrong supporter), from where the input put it: carried
+            # by a supporter the graph got wrong, it may have gone far
             here = pose.copy()
             here[:3, 3] += fa.com_world(info["input"], info["com"]) - fa.com_world(pose, info["com"])
             points = transform_points(here, np.vstack(proxy.hulls))

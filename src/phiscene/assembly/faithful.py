@@ -36,7 +36,7 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    ``max_stable_angle``, nearest first, at most ``max_candidates`` of them
    (``stable``); a run with high damping and rolling friction whose resting
    pose is then settled again at normal settings (``damped``); when none of
-   these stayed in place, the pose moved onto the nearest upward-facing
+   these stayed in place, or those that did only balance on an edge, the pose moved onto the nearest upward-facing
    surface of the objects placed before it within ``onto_reach`` (``onto``,
    :func:`onto_start`: a depth error put it beside the shelf it stands on); when every
    start so far went farther than ``max_shift`` or lost its supporters (a jug
