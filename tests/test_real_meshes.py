@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from phiscene.proxies import ProxyParams, decimated, decompose_route, fidelity, hull_excess
+from phiscene.proxies import ProxyParams, capped_hull, decimated, decompose_route, fidelity, hull_excess
 
 
 def open_dense(mesh: trimesh.Trimesh, faces: int = 30000) -> trimesh.Trimesh:
@@ -35,8 +35,27 @@ def test_fruit_like_mesh_takes_one_hull_quickly():
     hulls, route = decompose_route(fruit, ProxyParams())
     assert route == "single_hull" and len(hulls) == 1
     assert time.perf_counter() - t0 < 10.0
-    # the hull is the mesh's convex hull: no mesh point outside it (fidelity's own plane test, independent of route)
-    assert fidelity(fruit, hulls)[1] < 1e-9
+    # the mesh's convex hull (thousands of vertices) capped at the vertex budget: within 0.5 % of the diagonal of
+    # every mesh point (fidelity's own plane test) and within 1 % of the full hull's volume
+    full = fruit.convex_hull
+    assert len(full.vertices) > 2 * ProxyParams().max_hull_vertices
+    assert len(hulls[0]) <= ProxyParams().max_hull_vertices * 1.05
+    assert fidelity(fruit, hulls)[1] < 0.005 * np.linalg.norm(fruit.extents)
+    assert trimesh.convex.convex_hull(hulls[0]).volume == pytest.approx(full.volume, rel=0.01)
+
+
+def test_capped_hull_of_a_sphere_stays_on_the_sphere():
+    sphere = trimesh.creation.icosphere(5, 1.0)  # 10242 vertices, all on its hull
+    v = capped_hull(sphere, 256)
+    assert len(v) <= 270
+    # what is kept is the sphere: vertices within 2 % of the radius (a 256-vertex polytope is 0.6 % off between its
+    # vertices), volume within 2 % of 4/3 pi r^3
+    assert np.abs(np.linalg.norm(v, axis=1) - 1.0).max() < 0.02
+    assert trimesh.convex.convex_hull(v).volume == pytest.approx(4.0 / 3.0 * np.pi, rel=0.02)
+    # under the budget (or with no budget) the hull's own vertices, unchanged
+    box = trimesh.creation.box((0.3, 0.2, 0.1))
+    np.testing.assert_allclose(np.sort(capped_hull(box, 256), axis=0), np.sort(box.convex_hull.vertices, axis=0))
+    assert len(capped_hull(sphere, 0)) == 10242
 
 
 def test_table_is_decomposed_within_bounded_time_and_covers_the_mesh():

@@ -30,7 +30,7 @@ from phiscene.params import Params
 log = logging.getLogger(__name__)
 
 #: Bump when the decomposition code changes in a way that changes results.
-PROXY_VERSION = 2
+PROXY_VERSION = 3
 #: Routes a decomposition can take (recorded in ``Proxy.meta["route"]``).
 ROUTES = ("convex", "single_hull", "decomposed")
 
@@ -48,7 +48,8 @@ class ProxyParams(Params):
     max_hulls
         Cap on the number of hulls (-1 = no cap).
     max_hull_vertices
-        Vertex cap per hull (CoACD decimation / V-HACD maxNumVerticesPerCH).
+        Vertex cap per hull (CoACD decimation / V-HACD maxNumVerticesPerCH / the single hull of a nearly convex
+        mesh, :func:`capped_hull`).
     preprocess_resolution
         CoACD manifold preprocessing voxel resolution.
     resolution
@@ -168,8 +169,23 @@ def decompose_route(mesh: trimesh.Trimesh, params: ProxyParams) -> tuple[list[np
         return [np.asarray(mesh.convex_hull.vertices, dtype=float)], "convex"
     work = decimated(mesh, params.max_faces)
     if params.convex_tolerance > 0 and hull_excess(work, seed=params.seed) <= params.convex_tolerance:
-        return [np.asarray(mesh.convex_hull.vertices, dtype=float)], "single_hull"
+        return [capped_hull(mesh, params.max_hull_vertices)], "single_hull"
     return _decompose(work, params), "decomposed"
+
+
+def capped_hull(mesh: trimesh.Trimesh, max_vertices: int) -> np.ndarray:
+    """Vertices (v, 3) of the convex hull of ``mesh``, at most about ``max_vertices`` of them.
+
+    The hull of a 30,000-face scan of a fruit has thousands of vertices; collision tests and the enumeration
+    of resting poses scale with them. A larger hull is quadric-decimated (``fast_simplification``) to the
+    budget and the hull of what remains is taken, so the proxy stays convex and close to the full hull (the
+    fidelity check measures it against the mesh). 0 = no cap.
+    """
+    hull = mesh.convex_hull
+    if max_vertices <= 0 or len(hull.vertices) <= max_vertices:
+        return np.asarray(hull.vertices, dtype=float)
+    small = decimated(hull, max(2 * max_vertices - 4, 100))
+    return np.asarray(trimesh.convex.convex_hull(small.vertices).vertices, dtype=float)
 
 
 def _decompose(mesh: trimesh.Trimesh, params: ProxyParams) -> list[np.ndarray]:

@@ -6,7 +6,7 @@ bumping one here after a behaviour change reruns exactly the affected jobs
 """
 
 BENCHMARK = 2
-PROXIES = 1
+PROXIES = 2
 TOPOLOGY = 1
 GROUND = 2
 METRICS = 2

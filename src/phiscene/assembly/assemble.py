@@ -163,6 +163,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     objects: dict[str, dict] = {}
     coms: dict[str, np.ndarray] = {}  # faithful: centre of mass per object, local frame
     surfaces: dict[str, np.ndarray] = {}  # faithful: upward surface samples per placed object (remedy onto)
+    world_meshes: dict[str, object] = {}  # faithful: placed supporters' meshes at their grounded poses
     world_cm = BulletWorld(sim, cache_dir) if params.settle else contextlib.nullcontext()
     with world_cm as world:
         if params.settle:
@@ -177,7 +178,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             if oid in attached:
                 if params.faithful.enabled and params.faithful.flush:
                     pose = _flush_attached(scene, oid, obj, proxies.get(oid), attached[oid],
-                                           params.faithful.max_flush_angle, rec)
+                                           params.faithful.max_flush_angle, cache_dir, rec)
                 _fix(world if params.settle else None, oid, obj.mesh(), proxies.get(oid), pose, sim, rec)
                 total, turned = window_motion(initial, pose)
                 rec.update(displacement=_round(total), rotation_change=_round(turned))
@@ -193,7 +194,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             info = None
             if fp.enabled:
                 t0 = time.perf_counter()
-                info = _faithful_info(scene, oid, obj, proxies.get(oid), graph, poses)
+                info = _faithful_info(scene, oid, obj, proxies.get(oid), graph, poses, world_meshes, cache_dir)
                 info["surfaces"] = lambda names: _surfaces(scene, poses, names, pp.seed, surfaces)
                 carrier = next((q for q in info["below"] if q in poses), None)
                 if fp.carry and carrier is not None:
@@ -270,7 +271,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
 
 
 def _flush_attached(scene: Scene, oid: str, obj, proxy: Proxy | None, holder: str, max_angle_deg: float,
-                    rec: dict) -> np.ndarray:
+                    cache_dir: Path, rec: dict) -> np.ndarray:
     """The pose (4, 4) of an attached object made flush with the wall or ceiling holding it
     (:func:`~phiscene.assembly.faithful.flush_attached`); its input pose when the holder is not a plane of
     ``scene.structure`` (the ground stands for an unknown wall). Fills ``rec`` (``flush_angle`` deg,
@@ -283,9 +284,10 @@ def _flush_attached(scene: Scene, oid: str, obj, proxy: Proxy | None, holder: st
         return pose
     points = np.vstack(proxy.hulls) if proxy is not None and proxy.hulls else np.asarray(obj.mesh().vertices)
     hull = trimesh.convex.convex_hull(points)
-    out, angle, shift = fa.flush_attached(pose, fa.resting_normals(hull.vertices), np.asarray(hull.center_mass),
-                                          hull.vertices, np.asarray(plane.normal, dtype=float), plane.offset,
-                                          plane.kind == "wall", max_angle_deg)
+    normals = _resting_normals(hull.vertices, cache_dir)
+    out, angle, shift = fa.flush_attached(pose, normals, np.asarray(hull.center_mass), hull.vertices,
+                                          np.asarray(plane.normal, dtype=float), plane.offset, plane.kind == "wall",
+                                          max_angle_deg)
     rec.update(flush_angle=_round(angle), attach_shift=_round(shift))
     return out
 
@@ -346,8 +348,13 @@ def _progress_line(index: int, n: int, oid: str, rec: dict) -> str:
     return " ".join(parts)
 
 
-def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, poses: dict[str, np.ndarray]) -> dict:
-    """What the faithful stages need about ``oid``: supporters, their normal, resting facets, centre of mass."""
+def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, poses: dict[str, np.ndarray],
+                   world_meshes: dict[str, object], cache_dir: Path) -> dict:
+    """What the faithful stages need about ``oid``: supporters, their normal, resting facets, centre of mass.
+
+    ``world_meshes`` caches each placed supporter's world-frame mesh (id -> trimesh; its spatial index is built
+    once, not once per object it carries); resting facets are cached in ``cache_dir`` by hull.
+    """
     import trimesh
 
     if graph is not None:
@@ -367,16 +374,41 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
         if p == "ground":
             parents_world[p] = None
         elif p in poses:
-            parents_world[p] = scene.get(p).mesh().copy().apply_transform(poses[p])
+            if p not in world_meshes:
+                world_meshes[p] = scene.get(p).mesh().copy().apply_transform(poses[p])
+            parents_world[p] = world_meshes[p]
     world_mesh = hull.copy().apply_transform(np.asarray(obj.pose, dtype=float))
     up = fa.support_normal(world_mesh, parents_world)
     flushable = not leaning and bool(below)
-    normals = fa.resting_normals(hull.vertices) if flushable else np.zeros((0, 3))
+    normals = _resting_normals(hull.vertices, cache_dir) if flushable else np.zeros((0, 3))
     leaning_ids = [e.source for e in edges if e.relation == "leans_on"]
     return {"parents": parents, "below": below, "leaning": leaning_ids, "up": up, "normals": normals, "com": com,
             "flushable": flushable, "flush_angle": 0.0, "diag": float(np.linalg.norm(mesh.extents) * scale),
             "placed": list(poses), "input": np.asarray(obj.pose, dtype=float),
             "walls": [q for q in scene.structure if q.kind == "wall"]}
+
+
+def _resting_normals(hull_points: np.ndarray, cache_dir: Path) -> np.ndarray:
+    """:func:`~phiscene.assembly.faithful.resting_normals` of a hull (k, 3), cached in ``cache_dir/resting`` by
+    the hull's vertices (enumerating the resting poses of a 500-vertex hull takes about 0.4 s)."""
+    import hashlib
+
+    from phiscene.atomic import atomic_path
+
+    points = np.ascontiguousarray(hull_points, dtype=float)
+    key = hashlib.sha256(points.tobytes() + str(points.shape).encode()).hexdigest()[:20]
+    path = Path(cache_dir) / "resting" / f"{key}.npy"
+    if path.exists():
+        try:
+            cached = np.load(path)
+            if cached.ndim == 2 and cached.shape[1] == 3:
+                return cached
+        except (OSError, ValueError):
+            pass  # unreadable: recompute and rewrite
+    normals = fa.resting_normals(points)
+    with atomic_path(path) as tmp:
+        np.save(tmp, normals)
+    return normals
 
 
 def _surfaces(scene: Scene, poses: dict[str, np.ndarray], names: list[str], seed: int,
