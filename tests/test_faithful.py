@@ -362,7 +362,8 @@ def test_onto_start_centres_the_footprint_inside_the_edge_clear_of_walls():
     out, shift = onto_start(pose, np.zeros(3), pts, surface, reach=0.3, clearance=0.002)
     moved = trimesh.transform_points(cube.vertices, out)
     assert moved[:, 2].min() == pytest.approx(1.022, abs=1e-9)  # just above the surface
-    assert moved[:, 0].max() <= 0.15 and out[0, 3] >= 0.0  # the whole footprint over it, not past its middle
+    # the whole footprint over it by the smallest motion: just inside the edge (within two sample spacings)
+    assert 0.15 - 0.01 <= moved[:, 0].max() <= 0.15
     assert abs(out[1, 3]) < 0.005 and shift == pytest.approx(0.21 - out[0, 3], abs=1e-6)  # straight inwards
     # a wall at y = 0.03 (room on y < 0.03): the cube ends at least its footprint radius from it
     wall = Plane(id="wall_0", kind="wall", normal=(0.0, -1.0, 0.0), offset=0.03)
@@ -443,3 +444,24 @@ def test_a_tilted_wall_shelf_is_made_flush_and_what_stands_on_it_level(work, fai
     lo, _ = out.get("box").world_mesh().bounds
     cert = rec["objects"]["box"]["certificate"]
     assert cert["settled"] and cert["supporters_kept"] and lo[2] > 1.0  # on the board, not on the floor
+
+
+def test_onto_start_fits_a_long_object_along_a_narrow_shelf_by_the_smallest_motion():
+    from phiscene.assembly.faithful import fitting_point, onto_start
+
+    # a shelf top 0.6 m long (x) and 0.1 m deep (y) at z = 1.0, sampled every 5 mm; a plank 0.3 x 0.04 m lying
+    # along it but 8 cm in front of it (a depth error): it fits along the shelf, so it moves straight back by
+    # 5 cm, to the front edge, not to the shelf's middle and not along it
+    xs, ys = np.linspace(-0.3, 0.3, 121), np.linspace(-0.05, 0.05, 21)
+    shelf = np.array([(x, y, 1.0) for x in xs for y in ys])
+    plank = trimesh.creation.box((0.3, 0.04, 0.02))
+    pose = make_pose(translation=(0.0, -0.08, 1.012))
+    pts = trimesh.transform_points(plank.vertices, pose)
+    out, shift = onto_start(pose, np.zeros(3), pts, shelf, reach=0.3, clearance=0.002)
+    moved = trimesh.transform_points(plank.vertices, out)
+    assert out[0, 3] == pytest.approx(0.0, abs=1e-9)  # not along the shelf
+    assert -0.05 <= moved[:, 1].min() <= -0.05 + 0.01  # at the front edge, within two sample spacings
+    assert shift == pytest.approx(-0.03 - (-0.08), abs=0.01)
+    # turned across the shelf (0.3 m deep footprint on a 0.1 m shelf) it fits nowhere
+    across = np.array([[-0.02, -0.15], [0.02, -0.15], [0.02, 0.15], [-0.02, 0.15]])
+    assert fitting_point(shelf[:, :2], across, np.array([0.0, -0.08])) is None

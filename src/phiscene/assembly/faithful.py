@@ -508,16 +508,82 @@ def upward_samples(mesh_world, n: int, seed: int, min_normal_z: float = 0.8) -> 
     return np.asarray(pts, dtype=float)
 
 
+def fitting_point(level_xy: np.ndarray, footprint_xy: np.ndarray, start_xy: np.ndarray) -> np.ndarray | None:
+    """The point nearest to ``start_xy`` at which an object's footprint lies wholly over a sampled surface.
+
+    The surface (its samples of one level) is rasterised at its sampling spacing (holes between samples closed,
+    then one cell taken off its rim: a cell holding an edge sample reaches past the edge), eroded by the footprint (:func:`scipy.ndimage.binary_erosion`: the Minkowski difference, so an elongated
+    object fits along a narrow shelf, not across it), and the nearest cell centre that remains is returned: the
+    smallest horizontal motion that puts the object wholly over the surface.
+
+    Parameters
+    ----------
+    level_xy : (k, 2) float
+        Surface samples (xy) of one level.
+    footprint_xy : (m, 2) float
+        The object's collision-shape points (xy) relative to the point being placed (its centre of mass).
+    start_xy : (2,) float
+        Where that point is now.
+
+    Returns
+    -------
+    (2,) float, or ``None`` when the footprint fits nowhere (a surface smaller than the object) or the surface
+    has fewer than 4 samples.
+    """
+    from scipy import ndimage
+    from scipy.spatial import Delaunay, cKDTree
+
+    level_xy = np.asarray(level_xy, dtype=float).reshape(-1, 2)
+    rel = np.asarray(footprint_xy, dtype=float).reshape(-1, 2)
+    if len(level_xy) < 4 or len(rel) < 3:
+        return None
+    spacing = float(np.median(cKDTree(level_xy).query(level_xy, k=2)[0][:, 1]))
+    cell = max(spacing, 1e-3)
+    start = np.asarray(start_xy, dtype=float)
+    # the grid is anchored so that ``start_xy`` is a cell centre: a straight move along an axis stays on its line
+    lo = start - cell * (0.5 + np.ceil((start - level_xy.min(axis=0) + 2 * cell) / cell))
+    shape = np.ceil((np.maximum(level_xy.max(axis=0), start) + 2 * cell - lo) / cell).astype(int) + 1
+    idx = np.floor((level_xy - lo) / cell).astype(int)
+    surface = np.zeros(shape, dtype=bool)
+    surface[idx[:, 0], idx[:, 1]] = True
+    surface = ndimage.binary_closing(surface, structure=np.ones((3, 3), dtype=bool))
+    # a cell holding a sample may reach a cell's width past the surface's edge: one cell in from the edge
+    surface = ndimage.binary_erosion(surface, structure=ndimage.generate_binary_structure(2, 1))
+    # the footprint as cell offsets: every cell with its centre or a corner inside the footprint's convex hull
+    half = int(np.ceil(np.abs(rel).max() / cell)) + 1
+    grid = np.arange(-half, half + 1)
+    oi, oj = np.meshgrid(grid, grid, indexing="ij")
+    inside = np.zeros(oi.shape, dtype=bool)
+    try:
+        hull = Delaunay(rel)
+    except Exception:  # degenerate footprint (all points on a line): its bounding box
+        hull = None
+    for di, dj in ((0.0, 0.0), (-0.5, -0.5), (-0.5, 0.5), (0.5, -0.5), (0.5, 0.5)):
+        pts = np.column_stack([(oi.ravel() + di) * cell, (oj.ravel() + dj) * cell])
+        if hull is not None:
+            hit = hull.find_simplex(pts) >= 0
+        else:
+            hit = np.all((pts >= rel.min(axis=0)) & (pts <= rel.max(axis=0)), axis=1)
+        inside |= hit.reshape(oi.shape)
+    fits = ndimage.binary_erosion(surface, structure=inside, border_value=0)
+    cells = np.argwhere(fits)
+    if len(cells) == 0:
+        return None
+    centres = lo + (cells + 0.5) * cell
+    return centres[int(np.argmin(np.linalg.norm(centres - start, axis=1)))]
+
+
 def onto_start(pose: np.ndarray, com_local: np.ndarray, points_world: np.ndarray, surfaces: np.ndarray,
                reach: float, clearance: float, planes=()) -> tuple[np.ndarray, float] | None:
-    """``pose`` moved onto the nearest supporting surface: over it, inside its edge, just above it.
+    """``pose`` moved onto the nearest supporting surface: wholly over it by the smallest motion, just above it.
 
     An object carried from below whose input is off its supporter (a vase beside the wall shelf it stands on,
     a can hanging over the board's edge: the depth error of a single image) falls when released. Its
     supporter's top is found as the upward-facing surface point nearest to the bottom of the object (within
-    ``reach`` m); the object is moved horizontally so that its centre of mass lies over that surface, pulled
-    inward from the surface's edge by about its footprint radius (mean-shift steps over the samples of the same
-    level), and vertically so that its lowest point is ``clearance`` m above the surface.
+    ``reach`` m); the object is moved horizontally by the smallest motion that puts its whole footprint over the
+    samples of that level (:func:`fitting_point`), or, when it fits nowhere there (a surface narrower than the
+    object), over that point pulled inward from the edge by mean-shift steps; and vertically so that its lowest
+    point is ``clearance`` m above the surface.
 
     Parameters
     ----------
@@ -534,8 +600,9 @@ def onto_start(pose: np.ndarray, com_local: np.ndarray, points_world: np.ndarray
     clearance
         Gap left under the object (m).
     planes
-        Walls (:class:`~phiscene.scene.Plane`): surface points closer to one than the object's footprint radius
-        are left out (the object would stand in the wall).
+        Walls (:class:`~phiscene.scene.Plane`): surface points behind one are left out (an estimated wall may cut
+        through the shelf fixed to it), and in the fallback those closer to one than the object's footprint
+        radius.
 
     Returns
     -------
@@ -543,12 +610,9 @@ def onto_start(pose: np.ndarray, com_local: np.ndarray, points_world: np.ndarray
     """
     pts = np.asarray(points_world, dtype=float)
     footprint = max(0.5 * float(np.max(np.ptp(pts[:, :2], axis=0))), 1e-3 / 1.5)  # footprint radius
-    # mean-shift kernel: 1.5 footprint radii, so that the footprint ends clear of the edge (the shift converges
-    # slowly near the kernel radius)
-    radius = 1.5 * footprint
     surfaces = np.asarray(surfaces, dtype=float).reshape(-1, 3)
     for plane in planes:
-        surfaces = surfaces[plane.signed_distance(surfaces) >= footprint]
+        surfaces = surfaces[plane.signed_distance(surfaces) >= 0.0]
     if len(surfaces) == 0:
         return None
     c = com_world(pose, com_local)
@@ -559,12 +623,20 @@ def onto_start(pose: np.ndarray, com_local: np.ndarray, points_world: np.ndarray
     if d[k] > reach:
         return None
     level = surfaces[np.abs(surfaces[:, 2] - surfaces[k, 2]) <= 0.01]
-    target = surfaces[k, :2].copy()
-    for _ in range(10):  # mean shift: away from the edge, towards where the surface lies around the point
-        near = level[np.linalg.norm(level[:, :2] - target, axis=1) <= radius]
-        if len(near) == 0:
-            break
-        target = near[:, :2].mean(axis=0)
+    target = fitting_point(level[:, :2], pts[:, :2] - c[:2], c[:2])
+    if target is None or np.linalg.norm(target - c[:2]) > reach:
+        # fits nowhere within reach: the nearest point pulled inward, mean-shift steps with a kernel of 1.5
+        # footprint radii (the shift converges slowly near the kernel radius), clear of the walls
+        for plane in planes:
+            level = level[plane.signed_distance(level) >= footprint]
+        if len(level) == 0:
+            return None
+        target = level[int(np.argmin(np.linalg.norm(level - bottom, axis=1))), :2].copy()
+        for _ in range(10):  # mean shift: away from the edge, towards where the surface lies around the point
+            near = level[np.linalg.norm(level[:, :2] - target, axis=1) <= 1.5 * footprint]
+            if len(near) == 0:
+                break
+            target = near[:, :2].mean(axis=0)
     out = np.array(pose, dtype=float, copy=True)
     out[:2, 3] += target - c[:2]
     out[2, 3] += surfaces[k, 2] + clearance - low
