@@ -512,9 +512,10 @@ def fitting_point(level_xy: np.ndarray, footprint_xy: np.ndarray, start_xy: np.n
     """The point nearest to ``start_xy`` at which an object's footprint lies wholly over a sampled surface.
 
     The surface (its samples of one level) is rasterised at its sampling spacing (holes between samples closed,
-    then one cell taken off its rim: a cell holding an edge sample reaches past the edge), eroded by the footprint (:func:`scipy.ndimage.binary_erosion`: the Minkowski difference, so an elongated
-    object fits along a narrow shelf, not across it), and the nearest cell centre that remains is returned: the
-    smallest horizontal motion that puts the object wholly over the surface.
+    then one cell taken off its rim: a cell holding an edge sample reaches past the edge), eroded by the
+    footprint (:func:`scipy.ndimage.binary_erosion`: the Minkowski difference, so an elongated object fits along
+    a narrow shelf, not across it), and the nearest cell centre that remains is returned: the smallest
+    horizontal motion that puts the object wholly over the surface.
 
     Parameters
     ----------
