@@ -465,3 +465,21 @@ def test_onto_start_fits_a_long_object_along_a_narrow_shelf_by_the_smallest_moti
     # turned across the shelf (0.3 m deep footprint on a 0.1 m shelf) it fits nowhere
     across = np.array([[-0.02, -0.15], [0.02, -0.15], [0.02, 0.15], [-0.02, 0.15]])
     assert fitting_point(shelf[:, :2], across, np.array([0.0, -0.08])) is None
+
+
+def test_fitting_point_stays_bounded_on_a_large_densely_sampled_surface():
+    import time
+
+    from phiscene.assembly.faithful import fitting_point
+
+    # a 2 x 2 m surface sampled every 5 mm with every sample doubled (zero spacing between twins), a 0.6 m square
+    # footprint 1 m off its edge: the raster is capped, so this takes well under a second, and the footprint ends
+    # wholly inside the surface, within a few cells of its edge
+    g = np.arange(-1.0, 1.0 + 1e-9, 0.005)
+    xy = np.array([(x, y) for x in g for y in g])
+    xy = np.vstack([xy, xy])
+    square = np.array([[-0.3, -0.3], [0.3, -0.3], [0.3, 0.3], [-0.3, 0.3]])
+    t0 = time.perf_counter()
+    p = fitting_point(xy, square, np.array([2.0, 0.0]))
+    assert time.perf_counter() - t0 < 2.0
+    assert p is not None and 1.0 - 0.3 - 0.1 <= p[0] <= 1.0 - 0.3 and abs(p[1]) < 0.05

@@ -77,6 +77,9 @@ BELOW = ("supports", "contains")
 #: Upward surface samples per placed object for the remedy ``onto`` (:func:`upward_samples`).
 ONTO_SAMPLES = 3000
 
+#: Remedy ``onto``: the footprint is rasterised with at most this many cells across (:func:`fitting_point`).
+FIT_CELLS = 48
+
 #: An attached object is moved onto the wall or ceiling it is fixed to when its back is at most this far (m) from
 #: it, in front or behind (:func:`flush_attached`); farther, the plane estimate is taken as wrong there.
 ATTACH_REACH = 0.1
@@ -539,7 +542,11 @@ def fitting_point(level_xy: np.ndarray, footprint_xy: np.ndarray, start_xy: np.n
     if len(level_xy) < 4 or len(rel) < 3:
         return None
     spacing = float(np.median(cKDTree(level_xy).query(level_xy, k=2)[0][:, 1]))
-    cell = max(spacing, 1e-3)
+    # the sampling spacing, but at most FIT_CELLS cells across the footprint and 8 FIT_CELLS across the surface:
+    # the erosion costs (surface cells) x (footprint cells)
+    reach_xy = float(np.max(np.ptp(level_xy, axis=0)))
+    size = float(np.max(np.ptp(rel, axis=0)))
+    cell = max(spacing, 1e-3, size / FIT_CELLS, reach_xy / (8 * FIT_CELLS))
     start = np.asarray(start_xy, dtype=float)
     # the grid is anchored so that ``start_xy`` is a cell centre: a straight move along an axis stays on its line
     lo = start - cell * (0.5 + np.ceil((start - level_xy.min(axis=0) + 2 * cell) / cell))
