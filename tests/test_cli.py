@@ -8,6 +8,7 @@ import numpy as np
 import trimesh
 
 from phiscene.meshes import save_mesh
+from phiscene.proxies import read_proxies
 from phiscene.scene import Scene, SceneObject, load_scene, save_scene
 from phiscene.transforms import make_pose
 
@@ -68,3 +69,23 @@ def test_ground_command_uses_the_method_settings(tmp_path):
                    "--method", "initial", cwd=tmp_path)
     assert bad.returncode == 1 and bad.stderr.strip().count("\n") == 0, bad.stderr
     assert "'initial'" in bad.stderr and "phi_scene_paper" in bad.stderr
+
+
+def test_ground_command_takes_a_suites_proxy_settings(tmp_path):
+    cube = save_mesh(trimesh.creation.box([0.1, 0.1, 0.1]), tmp_path / "meshes/cube.glb")
+    save_scene(Scene([SceneObject("cube", cube, make_pose(translation=[0, 0, 0.05]))]), tmp_path / "in/scene.json")
+    cfg = tmp_path / "cfg.yaml"
+    cfg.write_text("proxies: {backend: coacd}\ncache_dir: " + str(tmp_path / "cache") + "\n"
+                   "suites:\n  scans: {proxies: {backend: convex}}\n")
+    routes = {}
+    for name, extra in (("global", []), ("suite", ["--suite", "scans"])):
+        res = phiscene("ground", str(tmp_path / "in"), str(tmp_path / name), "--config", str(cfg), *extra,
+                       cwd=tmp_path)
+        assert res.returncode == 0, res.stderr
+        routes[name] = read_proxies(tmp_path / name / "proxies.npz")["cube"].meta["route"]
+    # a box is convex: the global coacd backend takes its single hull, the suite's backend the plain hull
+    assert routes == {"global": "single_hull", "suite": "convex"}
+    bad = phiscene("ground", str(tmp_path / "in"), str(tmp_path / "bad"), "--config", str(cfg), "--suite", "nope",
+                   cwd=tmp_path)
+    assert bad.returncode == 1 and bad.stderr.strip().count("\n") == 0, bad.stderr
+    assert "'nope'" in bad.stderr and "scans" in bad.stderr

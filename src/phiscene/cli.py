@@ -1,7 +1,7 @@
 """The ``phiscene`` command: run single stages outside Snakemake.
 
-    phiscene ground SCENE_DIR OUT_DIR [--topology geometric|height|given] [--config config/config.yaml]
-    phiscene metrics SCENE_JSON [--config ...]
+    phiscene ground SCENE_DIR OUT_DIR [--topology geometric|height|given] [--suite real] [--config config/config.yaml]
+    phiscene metrics SCENE_JSON [--suite real] [--config ...]
     phiscene bench OUT_DIR [--suite contact] [--index 0] [--config ...]
     phiscene failures [RESULTS_DIR] [--why]
     phiscene import-sam3d IN_DIR OUT_DIR [--floor NX NY NZ D] [--unit-scale 1]
@@ -41,6 +41,16 @@ def _config(path: str | None) -> dict:
         raise PhisceneError(f"{p}: not valid YAML ({str(exc).splitlines()[0]})") from None
 
 
+def _proxy_settings(cfg: dict, suite: str | None) -> dict:
+    """The config's proxy settings, with ``suite``'s override when one is named (as the workflow uses them)."""
+    from phiscene.config import suite_proxies
+
+    suites = cfg.get("suites") or {}
+    if suite is not None and suite not in suites:
+        raise PhisceneError(f"--suite {suite!r}: not a suite of the config ({', '.join(sorted(suites)) or 'none'})")
+    return suite_proxies(cfg, suite)
+
+
 def _scene_file(path: Path) -> Path:
     return path / "scene.json" if path.is_dir() else path
 
@@ -65,12 +75,13 @@ def cmd_ground(args: argparse.Namespace) -> None:
 
         assembly = method_assembly(cfg, args.method)
         backend = args.topology or methods[args.method].get("topology", "geometric")
+    proxy_settings = _proxy_settings(cfg, args.suite)
     given = Path(args.given) if args.given else scene.parent.parent / "gt" / "topology.json"
     if backend == "given" and not given.is_file():
         raise PhisceneError(f"{given}: topology file not found (pass --given FILE)")
     topo = cfg.get("topology", {})
     stages = [
-        ("proxies", lambda: pipeline.run_proxies(scene, out / "proxies.npz", cfg.get("proxies", {}), cache)),
+        ("proxies", lambda: pipeline.run_proxies(scene, out / "proxies.npz", proxy_settings, cache)),
         (f"topology ({backend})", lambda: pipeline.run_topology(
             scene, out / "topology.json", backend, topo.get(backend, {}), given_path=given if backend == "given"
             else None, attached=topo.get("attached", {}))),
@@ -98,7 +109,7 @@ def cmd_metrics(args: argparse.Namespace) -> None:
     scene = _scene_file(Path(args.scene))
     cache = Path(args.cache_dir or cfg.get("cache_dir", Path(tempfile.gettempdir()) / "phiscene-cache"))
     with tempfile.TemporaryDirectory() as tmp:
-        pipeline.run_proxies(scene, Path(tmp) / "p.npz", cfg.get("proxies", {}), cache)
+        pipeline.run_proxies(scene, Path(tmp) / "p.npz", _proxy_settings(cfg, args.suite), cache)
         settings = {"physical": cfg.get("metrics", {}).get("physical", {}), "sim": cfg.get("sim", {})}
         result = scene_metrics(scene, ["physical"], MetricInputs(proxies=Path(tmp) / "p.npz", cache_dir=cache),
                                settings)["physical"]
@@ -227,11 +238,14 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: phi_scene, faithful grounding; phi_scene_paper: the paper's loop)")
     g.add_argument("--topology", default=None, help="topology backend (default: the method's, else geometric)")
     g.add_argument("--given", help="topology JSON for --topology given (default: ../gt/topology.json)")
+    g.add_argument("--suite", help="take the proxy settings of this suite of the config (e.g. real: the lighter "
+                                   "CoACD search for 30k-face reconstructions; default: the global proxies section)")
     g.set_defaults(func=cmd_ground)
 
     m = sub.add_parser("metrics", help="physical metrics of one scene")
     m.add_argument("scene", help="scene.json or its folder")
     m.add_argument("--full", action="store_true", help="print per-object values too")
+    m.add_argument("--suite", help="take the proxy settings of this suite of the config (as ground --suite)")
     m.set_defaults(func=cmd_metrics)
 
     b = sub.add_parser("bench", help="build one embedded benchmark scene")

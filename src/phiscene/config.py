@@ -115,6 +115,15 @@ def method_assembly(config: Mapping[str, Any], method: str) -> dict:
     return deep_merge(config.get("assembly"), config["methods"][method].get("assembly"))
 
 
+def suite_proxies(config: Mapping[str, Any], suite: str | None = None) -> dict:
+    """The proxy settings of a suite's scenes (the params of the workflow's ``proxies`` rule).
+
+    ``proxies`` with the suite's ``proxies`` override deep-merged over it (the ``real`` suite's lighter
+    CoACD search for 30k-face reconstructions); ``suite=None`` gives ``proxies`` alone.
+    """
+    return deep_merge(config.get("proxies"), (config["suites"][suite].get("proxies") if suite else None))
+
+
 def bench_settings(config: Mapping[str, Any], suite: str) -> dict:
     """The benchmark settings of a suite's scenes (the params of the benchmark rule).
 

@@ -409,7 +409,7 @@ def suite_available(suite):
 
 def suite_proxies(wildcards):
     """`proxies` with the suite's `proxies:` override deep-merged over it (phiscene.config)."""
-    return phiscene.config.deep_merge(config["proxies"], config["suites"][wildcards.suite].get("proxies", {}))
+    return phiscene.config.suite_proxies(config, wildcards.suite)
 
 
 wildcard_constraints:
