@@ -469,3 +469,57 @@ def test_bridge_keeps_two_parents_after_assembly(tmp_path, seed):
     # the plank rests on both supports: its bottom is at the higher support top, and it stays level
     assert plank.bounds[0, 2] == pytest.approx(max(tops), abs=2e-3)
     assert _tilt_deg(out.get("plank").pose) < 1.0
+
+
+# ---------------------------------------------------------------- floor furniture prior
+
+def test_head_noun_of_descriptions():
+    from phiscene.topology.floor import head_noun, names_furniture
+
+    assert head_noun("white and gold table lamp on nightstand") == "lamp"
+    assert head_noun("wooden chair 87 cm") == "chair"
+    assert head_noun("wooden cabinet partially visible in the bottom left") == "cabinet"
+    assert names_furniture("white oval table") and names_furniture("light wood nightstand")
+    assert not names_furniture("desk lamp") and not names_furniture("vase on the table")
+
+
+def table_over_chairs(root, table_description, lift=0.06):
+    """A table (0.04 m top on four legs cut ``lift`` above the floor) over two chair-height boxes 1 cm under its top."""
+    legs = [box([0.04, 0.04, 0.70 - lift]).apply_translation([x, y, (0.70 + lift) / 2 - 0.72])
+            for x in (-0.48, 0.48) for y in (-0.28, 0.28)]
+    table = trimesh.util.concatenate([box([1.0, 0.6, 0.04]).apply_translation([0, 0, 0.0])] + legs)
+    specs = [("table", table, make_pose(translation=[0, 0, 0.72])),
+             ("chair_a", box([0.3, 0.3, 0.69]), make_pose(translation=[-0.2, 0, 0.345])),
+             ("chair_b", box([0.3, 0.3, 0.69]), make_pose(translation=[0.2, 0, 0.345]))]
+    scene = make_scene(root, specs)
+    descriptions = {"table": table_description, "chair_a": "wooden chair", "chair_b": "wooden chair"}
+    return Scene([SceneObject(o.id, o.mesh_path, o.pose, description=descriptions[o.id]) for o in scene.objects])
+
+
+@pytest.mark.parametrize("description, on_floor", [("white oval table", True), ("wooden crate", False)])
+def test_floor_furniture_stands_on_the_floor_not_on_the_chairs_under_it(tmp_path, description, on_floor):
+    from phiscene.topology.geometric import GeometricParams, infer
+
+    scene = table_over_chairs(tmp_path, description)
+    # the geometry alone: the top's underside lies 1 cm over both boxes, the cut legs 6 cm over the floor
+    plain = {e.source for e in infer(scene, GeometricParams(floor_reach=0.0)).edges if e.target == "table"}
+    assert plain == {"chair_a", "chair_b"}
+    graph = infer(scene, GeometricParams())
+    into_table = {e.source for e in graph.edges if e.target == "table"}
+    assert into_table == ({GROUND} if on_floor else {"chair_a", "chair_b"})
+    assert graph.meta["floor_standing"] == (["table"] if on_floor else [])
+    # the chairs stand on the floor either way
+    assert {e.source for e in graph.edges if e.target in ("chair_a", "chair_b")} == {GROUND}
+
+
+def test_floor_prior_leaves_furniture_that_is_high_up(tmp_path):
+    from phiscene.topology.geometric import GeometricParams, infer
+
+    # a stool standing on a table, 0.75 m above the floor: the table holds it whatever its name
+    specs = [("table", box([1.0, 0.6, 0.75]), make_pose(translation=[0, 0, 0.375])),
+             ("stool", box([0.3, 0.3, 0.4]), make_pose(translation=[0, 0, 0.95]))]
+    scene = make_scene(tmp_path, specs)
+    scene = Scene([SceneObject(o.id, o.mesh_path, o.pose, description=f"wooden {o.id}") for o in scene.objects])
+    graph = infer(scene, GeometricParams())
+    assert {e.source for e in graph.edges if e.target == "stool"} == {"table"}
+    assert graph.meta["floor_standing"] == []

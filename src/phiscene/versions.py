@@ -7,7 +7,7 @@ bumping one here after a behaviour change reruns exactly the affected jobs
 
 BENCHMARK = 2
 PROXIES = 2
-TOPOLOGY = 1
+TOPOLOGY = 2
 GROUND = 3
 METRICS = 2
 TABLES = 2

@@ -51,6 +51,9 @@ contact. An edge ``B -> A`` means B carries part of A's weight.
    undetermined support: from the object whose upward surface it passes
    through (too deep to count, or out the other side), else from the first
    upward surface straight below it (an object's, or the ground).
+9. **Floor furniture** (:mod:`phiscene.topology.floor`): a chair, table, bed or cabinet (the description's
+   head noun) whose bottom is within ``floor_reach`` of the ground stands on the ground, not on the higher
+   objects a depth error slid it over (a table over two chairs' seats).
 
 Relations: ``supports``; ``contains`` when the supporter rises more than
 ``tol`` above the contact and A's centre is within its xy bounds (a tray, a
@@ -80,6 +83,7 @@ from phiscene.topology.contacts import (
     pair_contacts,
     prepare_bodies,
 )
+from phiscene.topology.floor import floor_standing
 from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph
 from phiscene.topology.order import finalize
 from phiscene.topology.params import BackendParams
@@ -129,6 +133,9 @@ class GeometricParams(BackendParams):
     fallback_confidence
         Confidence of fallback edges (no contact at all) and of edges to objects that A
         merely passes into.
+    floor_reach
+        Floor furniture (a chair, a table, a bed: :mod:`phiscene.topology.floor`) whose bottom is within this
+        distance (m) of the ground stands on the ground, not on higher objects it overlaps (0 = no prior).
     seed
         Seed of the surface sampling.
     """
@@ -152,6 +159,7 @@ class GeometricParams(BackendParams):
     com_margin_abs: float = 0.01
     com_margin_rel: float = 0.05
     fallback_confidence: float = 0.2
+    floor_reach: float = 0.15
     seed: int = 0
 
 
@@ -549,7 +557,9 @@ def infer(scene, params: GeometricParams = GeometricParams()) -> SupportGraph:
         e, info = supporters_of(bodies[o.id], contacts[o.id], ancestors, bodies, params, scene.structure)
         edges += e
         diagnostics[o.id] = info
+    edges, floor = floor_standing(edges, scene, {k: b.bounds for k, b in bodies.items()}, params.floor_reach)
     walls = [p.id for p in scene.structure if any(e.source == p.id for e in edges)]
     graph = SupportGraph(objects=[GROUND] + scene.ids, edges=edges, backend="geometric",
-                         meta={"params": params.to_dict(), "objects": diagnostics}, structure=walls)
+                         meta={"params": params.to_dict(), "objects": diagnostics, "floor_standing": floor},
+                         structure=walls)
     return finalize(graph, areas={k: b.footprint for k, b in bodies.items()})
