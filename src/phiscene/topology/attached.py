@@ -99,16 +99,20 @@ def says_mounted(description: str) -> bool:
     return bool(words & set(WALL_WORDS)) or any(p in text for p in MOUNT_PHRASES)
 
 
-def names_fixture(description: str) -> bool:
-    """Whether a description's head (the words before its first :data:`HEAD_END` preposition) names a building
-    fixture (:data:`FIXTURE_WORDS`)."""
-    words = re.findall(r"[a-z]+", description.lower())
+def head_words(description: str) -> list[str]:
+    """The lower-case words of a description's head: those before its first :data:`HEAD_END` preposition
+    ("white curtains on the left window" -> ["white", "curtains"])."""
     head = []
-    for w in words:
+    for w in re.findall(r"[a-z]+", description.lower()):
         if w in HEAD_END:
             break
         head.append(w)
-    return bool(set(head) & set(FIXTURE_WORDS))
+    return head
+
+
+def names_fixture(description: str) -> bool:
+    """Whether a description's head (:func:`head_words`) names a building fixture (:data:`FIXTURE_WORDS`)."""
+    return bool(set(head_words(description)) & set(FIXTURE_WORDS))
 
 
 def _held_from_below(scene, oid: str, world: dict, ground: float, params: AttachedParams) -> bool:

@@ -14,17 +14,13 @@ leans on, and gets the ground as a supporter. A chair stacked on a table, a stoo
 
 from __future__ import annotations
 
-import re
-
+from phiscene.topology.attached import head_words
 from phiscene.topology.graph import GROUND, SupportEdge
 
 #: Head nouns of furniture that stands on the floor.
 FURNITURE_WORDS = ("chair", "chairs", "armchair", "table", "tables", "desk", "sofa", "couch", "bed", "cabinet",
                    "dresser", "wardrobe", "bookshelf", "bookcase", "nightstand", "stool", "bench", "ottoman",
                    "sideboard", "cupboard", "drawers", "refrigerator", "fridge", "piano", "armoire", "credenza")
-#: Prepositions that end a description's head ("<head> on the <supporter>").
-HEAD_END = ("on", "under", "in", "at", "by", "near", "beside", "above", "below", "next", "with", "over", "against",
-            "behind", "of", "from", "to")
 #: Words after the head noun that do not name another object ("wooden cabinet partially visible", "chair 87 cm").
 TRAILING = ("partially", "partly", "visible", "occluded", "cut", "off", "cropped", "cm", "mm", "m", "x")
 #: Relations an object keeps whatever the prior says (it leans on a wall or an object besides standing).
@@ -32,14 +28,10 @@ KEPT_RELATIONS = ("leans_on",)
 
 
 def head_noun(description: str) -> str:
-    """The last word of a description's head (before its first :data:`HEAD_END` preposition), trailing
+    """The last word of a description's head (:func:`~phiscene.topology.attached.head_words`), trailing
     qualifiers and units (:data:`TRAILING`) skipped: "white and gold table lamp on nightstand" -> "lamp",
     "wooden chair 87 cm" -> "chair", "wooden cabinet partially visible in the bottom left" -> "cabinet"."""
-    head = []
-    for w in re.findall(r"[a-z]+", description.lower()):
-        if w in HEAD_END:
-            break
-        head.append(w)
+    head = head_words(description)
     while head and head[-1] in TRAILING:
         head.pop()
     return head[-1] if head else ""
