@@ -465,6 +465,10 @@ def test_onto_start_fits_a_long_object_along_a_narrow_shelf_by_the_smallest_moti
     # turned across the shelf (0.3 m deep footprint on a 0.1 m shelf) it fits nowhere
     across = np.array([[-0.02, -0.15], [0.02, -0.15], [0.02, 0.15], [-0.02, 0.15]])
     assert fitting_point(shelf[:, :2], across, np.array([0.0, -0.08])) is None
+    # a footprint with no area (a rod's points on one line: no Delaunay triangulation) is fitted by its box
+    rod = np.array([[-0.1, 0.0], [0.0, 0.0], [0.1, 0.0]])
+    p = fitting_point(shelf[:, :2], rod, np.array([0.0, -0.08]))
+    assert p is not None and p[0] == pytest.approx(0.0, abs=1e-9) and -0.05 < p[1] <= -0.05 + 0.01
 
 
 def test_fitting_point_stays_bounded_on_a_large_densely_sampled_surface():

@@ -487,7 +487,7 @@ def table_over_chairs(root, table_description, lift=0.06):
     """A table (0.04 m top on four legs cut ``lift`` above the floor) over two chair-height boxes 1 cm under its top."""
     legs = [box([0.04, 0.04, 0.70 - lift]).apply_translation([x, y, (0.70 + lift) / 2 - 0.72])
             for x in (-0.48, 0.48) for y in (-0.28, 0.28)]
-    table = trimesh.util.concatenate([box([1.0, 0.6, 0.04]).apply_translation([0, 0, 0.0])] + legs)
+    table = trimesh.util.concatenate([box([1.0, 0.6, 0.04])] + legs)
     specs = [("table", table, make_pose(translation=[0, 0, 0.72])),
              ("chair_a", box([0.3, 0.3, 0.69]), make_pose(translation=[-0.2, 0, 0.345])),
              ("chair_b", box([0.3, 0.3, 0.69]), make_pose(translation=[0.2, 0, 0.345]))]

@@ -535,7 +535,7 @@ def fitting_point(level_xy: np.ndarray, footprint_xy: np.ndarray, start_xy: np.n
     has fewer than 4 samples.
     """
     from scipy import ndimage
-    from scipy.spatial import Delaunay, cKDTree
+    from scipy.spatial import Delaunay, QhullError, cKDTree
 
     level_xy = np.asarray(level_xy, dtype=float).reshape(-1, 2)
     rel = np.asarray(footprint_xy, dtype=float).reshape(-1, 2)
@@ -564,7 +564,7 @@ def fitting_point(level_xy: np.ndarray, footprint_xy: np.ndarray, start_xy: np.n
     inside = np.zeros(oi.shape, dtype=bool)
     try:
         hull = Delaunay(rel)
-    except Exception:  # degenerate footprint (all points on a line): its bounding box
+    except QhullError:  # degenerate footprint (all points on a line): its bounding box
         hull = None
     for di, dj in ((0.0, 0.0), (-0.5, -0.5), (-0.5, 0.5), (0.5, -0.5), (0.5, 0.5)):
         pts = np.column_stack([(oi.ravel() + di) * cell, (oj.ravel() + dj) * cell])
