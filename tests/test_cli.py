@@ -89,3 +89,22 @@ def test_ground_command_takes_a_suites_proxy_settings(tmp_path):
                    cwd=tmp_path)
     assert bad.returncode == 1 and bad.stderr.strip().count("\n") == 0, bad.stderr
     assert "'nope'" in bad.stderr and "scans" in bad.stderr
+
+
+def test_bench_command_deep_merges_a_suites_benchmark_override():
+    from phiscene.cli import _bench_settings
+    from phiscene.errors import PhisceneError
+
+    cfg = {"benchmark": {"seed": 3, "degrade": {"rotation_sigma_deg": 9.0, "kind": "clean"}},
+           "sim": {"dt": 0.01}, "proxies": {"backend": "convex"},
+           "suites": {"corners": {"benchmark": {"degrade": {"kind": "foundation"}}}}}
+    params = _bench_settings(cfg, "corners")
+    # the suite's degrade kind overrides, the global magnitude it does not name survives (a shallow merge lost it)
+    assert params["degrade"] == {"rotation_sigma_deg": 9.0, "kind": "foundation"}
+    assert params["seed"] == 3 and params["sim"] == {"dt": 0.01} and params["proxies"] == {"backend": "convex"}
+    try:
+        _bench_settings(cfg, "nope")
+    except PhisceneError as exc:
+        assert "'nope'" in str(exc) and "corners" in str(exc)
+    else:
+        raise AssertionError("an unknown suite was accepted")

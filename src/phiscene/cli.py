@@ -41,13 +41,27 @@ def _config(path: str | None) -> dict:
         raise PhisceneError(f"{p}: not valid YAML ({str(exc).splitlines()[0]})") from None
 
 
+def _known_suite(cfg: dict, suite: str) -> None:
+    """Raise a one-line error when ``suite`` is not a suite of the config."""
+    suites = cfg.get("suites") or {}
+    if suite not in suites:
+        raise PhisceneError(f"--suite {suite!r}: not a suite of the config ({', '.join(sorted(suites)) or 'none'})")
+
+
+def _bench_settings(cfg: dict, suite: str) -> dict:
+    """The benchmark settings of ``suite``, deep-merged as the workflow's ``benchmark`` rule merges them."""
+    from phiscene.config import bench_settings
+
+    _known_suite(cfg, suite)
+    return bench_settings(cfg, suite)
+
+
 def _proxy_settings(cfg: dict, suite: str | None) -> dict:
     """The config's proxy settings, with ``suite``'s override when one is named (as the workflow uses them)."""
     from phiscene.config import suite_proxies
 
-    suites = cfg.get("suites") or {}
-    if suite is not None and suite not in suites:
-        raise PhisceneError(f"--suite {suite!r}: not a suite of the config ({', '.join(sorted(suites)) or 'none'})")
+    if suite is not None:
+        _known_suite(cfg, suite)
     return suite_proxies(cfg, suite)
 
 
@@ -121,8 +135,7 @@ def cmd_bench(args: argparse.Namespace) -> None:
     from phiscene.bench.build import build_scene
 
     cfg = _config(args.config)
-    params = {**cfg.get("benchmark", {}), **cfg.get("suites", {}).get(args.suite, {}).get("benchmark", {}),
-              "sim": cfg.get("sim", {}), "proxies": cfg.get("proxies", {})}
+    params = _bench_settings(cfg, args.suite)
     cache = Path(args.cache_dir or cfg.get("cache_dir", Path(args.out_dir) / "cache"))
     build_scene(Path(args.out_dir), args.suite, args.index, params, cache)
     print(f"wrote {args.out_dir}")
