@@ -221,6 +221,32 @@ def test_sunk_box_is_lifted_straight_up_by_the_ground():
     assert x[2] == pytest.approx(0.03 + EPS, abs=1e-4)
 
 
+def test_planar_push_clears_a_table_top_sideways_and_keeps_the_height(work):
+    # a table top (fixed) 40-44 cm above the floor; a 43 cm box standing on the floor (2 eps above it, so the
+    # ground term is idle) reaches 3 cm up into the top and 2 cm in under its edge at x = 0.2
+    top = trimesh.creation.box((0.4, 0.4, 0.04))
+    post = trimesh.creation.box((0.1, 0.1, 0.43))
+    slab = _body("top", top, make_pose(translation=(0, 0, 0.42)), work["cache"])
+    pose = make_pose(translation=(0.23, 0, 0.215 + 2 * EPS))
+    active = _body("post", post, pose, work["cache"])
+    x, info = resolve_penetration(active, [slab], 0.0, PenetrationParams(optimizer="steepest"), planar=True)
+    assert info["final_loss"] == 0.0
+    assert x[2] == 0.0  # its height is the floor's
+    moved, world_top = post.copy(), top.copy()
+    moved.apply_translation(pose[:3, 3] + x)
+    world_top.apply_translation((0, 0, 0.42))
+    # the shortest horizontal way out: 2 cm + eps along +x (the top's edge), to within one step
+    assert x[0] == pytest.approx(0.02 + EPS, abs=PenetrationParams().lr) and abs(x[1]) < 0.005
+    assert clearance(moved, world_top) >= EPS - 1e-3
+    # the ground still pushes in every direction: the same box sunk 1 cm into the floor rises out of it by
+    # 1 cm + eps (its top then 4 cm into the table top), and leaves the table top sideways
+    sunk = _body("post", post, make_pose(translation=(0.23, 0, 0.215 - 0.01)), work["cache"])
+    x2, info2 = resolve_penetration(sunk, [slab], 0.0, PenetrationParams(optimizer="steepest"), planar=True)
+    assert info2["final_loss"] == 0.0
+    lr = PenetrationParams().lr  # steepest descent moves in steps of lr: within one step of the exit
+    assert 0.01 + EPS - 1e-4 <= x2[2] <= 0.01 + EPS + lr and x2[0] >= 0.02 + EPS - 1e-3
+
+
 def test_clear_object_does_not_move_and_far_objects_are_pruned(work):
     cube = trimesh.creation.box((0.1, 0.1, 0.1))
     a = _body("a", cube, make_pose(translation=(0, 0, 0.3)), work["cache"])

@@ -240,3 +240,23 @@ def test_sdf_stage_pushes_an_object_out_of_a_wall(cache):
     assert x[0] == pytest.approx(0.03 + params.eps, abs=2e-3) and abs(x[1]) < 1e-3 and abs(x[2]) < 2e-3
     x0, _ = resolve_penetration(body, [], 0.0, params)
     assert np.linalg.norm(x0) < 1e-3  # without the wall there is nothing to resolve
+
+
+def test_planar_sdf_stage_leaves_a_tilted_wall_horizontally(cache):
+    from phiscene.assembly.penetration import PenetrationParams, resolve_penetration, sdf_body
+    from phiscene.scene import Plane
+
+    params = PenetrationParams(optimizer="steepest")
+    tilt = np.radians(3.0)  # an estimated wall 3 degrees off vertical, leaning over the room
+    wall = Plane(id="wall_t", kind="wall", normal=(float(np.cos(tilt)), 0.0, float(np.sin(tilt))), offset=0.0)
+    box = trimesh.creation.box((0.2, 0.2, 0.2))
+    body = sdf_body("box", box, make_pose(translation=(0.07, 0.0, 0.1 + 2 * params.eps)), 512, params, cache)
+    free, _ = resolve_penetration(body, [], 0.0, params, planes=[wall])
+    flat, info = resolve_penetration(body, [], 0.0, params, planes=[wall], planar=True)
+    # along the normal the wall lifts the box (tan 3 deg of the push); planar, only the ground may move it up
+    assert free[2] > 0.05 * free[0] > 0
+    assert info["final_loss"] == 0.0 and flat[2] == 0.0 and abs(flat[1]) < 1e-9
+    # out of the wall horizontally until its deepest point (the back face's bottom edge, 2 eps above the
+    # ground) clears it by eps: cos t (dx - 0.03) + 2 eps sin t = eps
+    need = 0.03 + (params.eps - 2 * params.eps * np.sin(tilt)) / np.cos(tilt)
+    assert flat[0] == pytest.approx(need, abs=1e-3)

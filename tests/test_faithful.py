@@ -166,6 +166,35 @@ def test_column_balanced_on_an_edge_is_moved_inside_it(work, onto_reach):
     assert np.linalg.norm(t[:2] - pose[:2, 3]) <= onto_reach
 
 
+@pytest.mark.parametrize("reach", [0.1, 0.0])
+def test_post_under_a_table_top_edge_is_pushed_out_sideways_and_stands(work, reach):
+    # a table (a slab 30-34 cm up on a pedestal); a 30 cm post standing on the floor 2 cm up (a depth error) reaches
+    # 2 cm up into the slab and 2 cm in under its edge (x = 0.15): the graph puts it on the floor alone
+    scene = scene_of(work, {"pedestal": ("column", make_pose(translation=(0.0, 0.0, 0.15))),
+                            "slab": ("slab", make_pose(translation=(0.0, 0.0, 0.32))),
+                            "post": ("column", make_pose(translation=(0.18, 0.0, 0.02 + 0.15)))})
+    g = graph_of(scene, [("ground", "pedestal", "supports"), ("pedestal", "slab", "supports"),
+                         ("ground", "post", "supports")])
+    out, rec = run(work, scene, g, params={"faithful": {"enabled": True, "planar_floor": reach},
+                                           "penetration_params": {"optimizer": "steepest"}})  # as phi_scene
+    post = rec["objects"]["post"]
+    # planar when its bottom (2 cm) is within reach of the floor; the table, on the pedestal, never is
+    assert post["sdf_planar"] is (reach > 0) and rec["objects"]["slab"]["sdf_planar"] is False
+    if reach == 0:
+        return
+    assert post["sdf_translation"][2] == 0.0 and post["sdf_final_loss"] == 0.0
+    # out from under the slab's edge (where the slab rests) by eps, within a solver step; then lowered onto the
+    # floor: upright, beside the slab
+    eps, lr = AssemblyParams().penetration_params.eps, AssemblyParams().penetration_params.lr
+    edge = out.get("slab").world_mesh().bounds[1, 0]
+    assert edge + eps - 1e-3 <= 0.13 + post["sdf_translation"][0] <= edge + eps + lr
+    R, t, _ = decompose(out.get("post").pose)
+    assert math.degrees(math.acos(min(1.0, R[2, 2]))) < 1.0
+    assert out.get("post").world_mesh().bounds[0, 2] == pytest.approx(0.0, abs=0.003)
+    assert out.get("post").world_mesh().bounds[0, 0] >= edge - 1e-3  # beside the slab, not under it
+    assert post["certificate"]["joint_stable"] and rec["objects"]["slab"]["certificate"]["joint_stable"]
+
+
 def test_paper_loop_unchanged_without_faithful(work):
     pose = make_pose(translation=(0.0, 0.0, 0.2))
     scene = scene_of(work, {"box": ("box", pose)})

@@ -8,7 +8,7 @@ bumping one here after a behaviour change reruns exactly the affected jobs
 BENCHMARK = 2
 PROXIES = 2
 TOPOLOGY = 2
-GROUND = 3
+GROUND = 4
 METRICS = 2
 TABLES = 2
 REPORT = 1

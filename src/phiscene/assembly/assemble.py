@@ -208,8 +208,10 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
 
             t0 = time.perf_counter()
             if params.penetration:
+                planar = info is not None and _on_the_floor(obj.mesh(), pose, info, scene.ground_height,
+                                                            fp.planar_floor)
                 pose = _resolve(oid, obj.mesh(), pose, placed, scene.ground_height, pp, cache_dir, rec,
-                                scene.structure)
+                                scene.structure, planar)
             else:
                 rec.update(sdf_iterations=0, sdf_initial_loss=None, sdf_final_loss=None,
                            sdf_translation=[0.0, 0.0, 0.0], sdf_context=[], sdf_grid_error=None)
@@ -305,17 +307,29 @@ def _fix(world, oid: str, mesh, proxy: Proxy | None, pose: np.ndarray, sim: SimS
 
 
 def _resolve(oid: str, mesh, pose: np.ndarray, placed: list[SdfBody], ground_height: float,
-             pp: PenetrationParams, cache_dir: Path, rec: dict, planes=()) -> np.ndarray:
-    """SDF stage: the pose (4, 4) translated clear of ``placed``, the ground and ``planes``; fills ``rec``."""
+             pp: PenetrationParams, cache_dir: Path, rec: dict, planes=(), planar: bool = False) -> np.ndarray:
+    """SDF stage: the pose (4, 4) translated clear of ``placed``, the ground and ``planes``; fills ``rec``.
+
+    ``planar``: pushed out of ``placed`` horizontally only (an object standing on the floor alone).
+    """
     active = sdf_body(oid, mesh, pose, pp.n_active, pp, cache_dir)
-    x, info = resolve_penetration(active, placed, ground_height, pp, planes)
-    rec.update(sdf_iterations=info["iterations"], sdf_initial_loss=_round(info["initial_loss"]),
+    x, info = resolve_penetration(active, placed, ground_height, pp, planes, planar)
+    rec.update(sdf_planar=planar, sdf_iterations=info["iterations"], sdf_initial_loss=_round(info["initial_loss"]),
                sdf_final_loss=_round(info["final_loss"]), sdf_translation=[_round(v) for v in x],
                sdf_context=info["context"],
                sdf_grid_error=_round(active.scale * active.grid.error.get("max_abs", float("nan"))))
     out = pose.copy()
     out[:3, 3] += x
     return out
+
+
+def _on_the_floor(mesh, pose: np.ndarray, info: dict, ground_height: float, reach: float) -> bool:
+    """Whether an object stands on the floor alone: the ground is its only supporter from below, it leans on
+    nothing, and its lowest point (at ``pose`` (4, 4)) is at most ``reach`` (m) above the ground
+    (``FaithfulParams.planar_floor``)."""
+    if reach <= 0 or info["below"] != ["ground"] or info["leaning"]:
+        return False
+    return float(transform_points(pose, np.asarray(mesh.vertices))[:, 2].min()) - ground_height <= reach
 
 
 def _settle(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: SimSettings, sp: SettleParams,

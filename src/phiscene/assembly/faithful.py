@@ -106,6 +106,15 @@ class FaithfulParams(Params):
         Largest rotation accepted from settling (deg).
     carry
         Move each object with its (first placed) supporter from below (:func:`carried`).
+    planar_floor
+        An object that stands on the floor alone (the ground is its only supporter from below, it leans on
+        nothing) and whose lowest point is at most this far (m) above the ground is pushed out of the objects
+        placed before it and out of the walls horizontally only (``planar`` of
+        :func:`~phiscene.assembly.penetration.resolve_penetration`; 0 = off): its height is the floor's, and a
+        vertical push out of a neighbour (a chair tucked under a table top that was lowered onto the floor)
+        lifts it off the floor, to topple or fall back into the overlap. Higher up, the graph is the suspect
+        (a box a depth error sank into the box it is stacked on, read as standing on the floor) and the push
+        is free.
     joint_settle_frames
         After the loop the whole scene is simulated together until every object is at rest, at most this many
         frames (0 = off): a supporter is then tested under the load placed on it later.
@@ -155,6 +164,7 @@ class FaithfulParams(Params):
     max_slide_frac: float = 0.25
     max_turn: float = 10.0
     carry: bool = True
+    planar_floor: float = 0.1
     joint_settle_frames: int = 240
     joint_frames: int = 120
     joint_tol: float = 0.005
@@ -175,7 +185,7 @@ class FaithfulParams(Params):
         for key in ("max_flush_angle", "max_stable_angle", "max_candidates", "tilt_test", "tilt_frames",
                     "joint_settle_frames", "joint_frames", "joint_tol", "joint_tol_deg", "max_slide",
                     "max_slide_frac", "max_turn", "contact_tol", "retry_rolling_friction", "max_shift",
-                    "shift_directions", "onto_reach"):
+                    "shift_directions", "onto_reach", "planar_floor"):
             if getattr(self, key) < 0:
                 raise ValueError(f"faithful parameter {key!r} must be >= 0, got {getattr(self, key)}")
         if not 0.0 <= self.retry_damping < 1.0:
