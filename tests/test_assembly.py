@@ -26,7 +26,7 @@ from phiscene.assembly import (
     sdf_body,
     settle_object,
 )
-from phiscene.assembly.penetration import AdamState
+from phiscene.assembly.penetration import AdamState, min_translation_search, minimize_hinge, search_directions
 from phiscene.errors import InputError
 from phiscene.inertia import rigid_props
 from phiscene.meshes import mesh_hash
@@ -187,6 +187,31 @@ def test_cube_penetrating_cube_ends_at_clearance_eps(work):
     world_lower.apply_translation((0, 0, 0.1))
     assert clearance(moved, world_lower) == pytest.approx(EPS, abs=1e-3)
     assert x[2] == pytest.approx(0.02 + EPS, abs=1e-3)
+
+
+def test_direction_search_clears_where_gradient_steps_stall():
+    """Two overlapping balls pushing the origin out along +x and -x: the gradient at the start is exactly zero, so
+    gradient steps never move; the search leaves along y, by the analytic sqrt(r^2 - c^2) (along x it would take
+    r + c)."""
+    r, c = 0.1, 0.03
+    centres = torch.tensor([[c, 0.0, 0.0], [-c, 0.0, 0.0]], dtype=torch.float64)
+
+    def loss(x):
+        return torch.relu(r - torch.linalg.vector_norm(x - centres, dim=1)).sum()
+
+    x, info = minimize_hinge(loss, (3,), 0.005, 300, 12, "steepest")
+    assert info["iterations"] == 300 and info["final_loss"] > 0 and np.all(x == 0.0)
+    found = min_translation_search(loss, np.zeros(3), search_directions(16, planar=True), 0.01, 0.6, 30)
+    assert abs(found[0]) < 1e-12 and found[2] == 0.0
+    assert abs(found[1]) == pytest.approx(np.sqrt(r * r - c * c), abs=1e-9)
+    assert min_translation_search(loss, np.zeros(3), search_directions(16, planar=True), 0.01, 0.05, 30) is None
+
+
+def test_search_directions_are_unit_and_planar_ones_horizontal():
+    sphere, ring = search_directions(32), search_directions(16, planar=True)
+    np.testing.assert_allclose(np.linalg.norm(sphere, axis=1), 1.0)
+    np.testing.assert_allclose(np.linalg.norm(ring, axis=1), 1.0)
+    assert np.all(ring[:, 2] == 0.0) and abs(sphere.mean(axis=0)).max() < 0.05  # spread evenly
 
 
 def test_plain_adam_overshoots_but_clears(work):

@@ -14,8 +14,15 @@ from phiscene.metrics.physical import PhysicalParams, physical_metrics
 from phiscene.proxies import ProxyParams, scene_proxies
 from phiscene.scene import Scene, SceneObject
 from phiscene.sim.settings import SimSettings
-from phiscene.topology.attached import AttachedParams, attached_ids, attached_objects, names_fixture, says_mounted
-from phiscene.transforms import make_pose
+from phiscene.topology.attached import (
+    AttachedParams,
+    attached_ids,
+    attached_objects,
+    names_fixture,
+    panel_normal,
+    says_mounted,
+)
+from phiscene.transforms import make_pose, rotation_z
 
 SIM = SimSettings()
 
@@ -62,6 +69,37 @@ def test_a_window_over_a_radiator_and_a_floor_length_curtain_are_attached(tmp_pa
     ])
     decided = attached_objects(scene)
     assert decided == {"window": "fixture", "curtain": "fixture"}
+
+
+def test_panel_at_any_heading_and_not_a_board_lying_flat():
+    """The thin axis of a panel is found at any heading (oriented box), and must be horizontal."""
+    heading = np.radians(37.0)
+    poster = trimesh.creation.box((0.6, 0.01, 0.8)).apply_transform(make_pose(rotation_z(heading), [1.0, 2.0, 1.5]))
+    axis = panel_normal(poster, 0.15)
+    assert axis is not None
+    # the box's thin local y axis, turned by the heading (up to sign)
+    assert abs(axis @ [-np.sin(heading), np.cos(heading), 0.0]) == pytest.approx(1.0, abs=1e-6)
+    board = trimesh.creation.box((0.6, 0.8, 0.01)).apply_transform(make_pose(rotation_z(heading), [0, 0, 0.9]))
+    assert panel_normal(board, 0.15) is None  # thin, but its thin axis is vertical
+    assert panel_normal(trimesh.creation.box((0.6, 0.2, 0.8)), 0.15) is None  # not thin
+
+
+def test_posters_overlapping_on_a_wall_do_not_hold_each_other_up(tmp_path):
+    """A poster whose bottom edge overlaps the top of another on the same wall is attached, as is the lower one; a
+    thick reconstruction of the lower one (no thin panel) holds nothing up either: it names a wall object."""
+    boxes = {"low": (0.3, 0.14, 0.25), "high": (0.3, 0.02, 0.3), "shelf": (0.4, 0.2, 0.02), "vase": (0.1, 0.1, 0.2)}
+    mesh = {n: save_mesh(trimesh.creation.box(s), tmp_path / f"{n}.obj") for n, s in boxes.items()}
+    turn = rotation_z(np.radians(25.0))
+    scene = Scene([
+        SceneObject("low", mesh["low"], make_pose(turn, [0.0, 2.0, 0.8]), "black wall poster"),
+        # its bottom (0.92 - 0.15 = 0.77) is inside the lower poster (top at 0.925)
+        SceneObject("high", mesh["high"], make_pose(turn, [-0.1, 2.05, 1.07]), "red wall poster"),
+        # a vase standing on a wall shelf: the shelf holds it (shelves are not wall objects)
+        SceneObject("shelf", mesh["shelf"], make_pose(translation=[1.5, 2.0, 1.2]), "wooden shelf on the wall"),
+        SceneObject("vase", mesh["vase"], make_pose(translation=[1.5, 2.0, 1.31]), "vase"),
+    ])
+    decided = attached_objects(scene)
+    assert decided == {"low": "description", "high": "description", "shelf": "description"}
 
 
 def test_decision_from_geometry_and_description(room):

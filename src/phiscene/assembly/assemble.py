@@ -315,7 +315,8 @@ def _resolve(oid: str, mesh, pose: np.ndarray, placed: list[SdfBody], ground_hei
     active = sdf_body(oid, mesh, pose, pp.n_active, pp, cache_dir)
     x, info = resolve_penetration(active, placed, ground_height, pp, planes, planar)
     rec.update(sdf_planar=planar, sdf_iterations=info["iterations"], sdf_initial_loss=_round(info["initial_loss"]),
-               sdf_final_loss=_round(info["final_loss"]), sdf_translation=[_round(v) for v in x],
+               sdf_final_loss=_round(info["final_loss"]), sdf_searched=info["searched"],
+               sdf_translation=[_round(v) for v in x],
                sdf_context=info["context"],
                sdf_grid_error=_round(active.scale * active.grid.error.get("max_abs", float("nan"))))
     out = pose.copy()
@@ -444,8 +445,9 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
     onto the nearest supporting surface, then horizontal shifts when every start so far went farther than
     ``max_shift`` or lost its supporters) is lowered onto what lies beneath and settled with the paper's
     settling; the first result within the slide/drop/turn bounds that keeps the graph's supporters is taken,
-    else the closest settled one that stayed in place (on its supporters if one did), else the closest. The
-    final pose is always the outcome of free settling, so it is as stable as the paper's.
+    else, avoiding gross failures (turned past ``max_stable_angle`` or moved past ``onto_reach``) where a start
+    did, the closest settled one that stayed in place (on its supporters if one did), else the closest. The
+    final pose is always the outcome of free settling.
     """
     from phiscene.inertia import rigid_props
 
@@ -493,7 +495,9 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                 f"lost supporters {lost}" if lost else "", "" if result.settled else "not settled",
                 "" if robust else f"marginal: tips when tilted {fp.tilt_test:g} deg"]
         stayed = ok and not lost
-        out = {"label": label, "result": result, "frames": frames,
+        # a gross failure: turned beyond any resting pose tried, or went farther than the onto remedy moves
+        gross = turned > fp.max_stable_angle or moved > fp.onto_reach
+        out = {"label": label, "result": result, "frames": frames, "gross": gross,
                "ok": stayed and result.settled and robust, "lost": bool(lost), "robust": robust,
                "stayed": stayed, "in_place": in_place, "travel": moved if not lost else math.inf,
                "cost": fa.closeness(pose, result.pose, info["com"], info["diag"], start=lowered) + fell,
@@ -531,10 +535,11 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                 if any(t["ok"] for t in done) or any(t["in_place"] and t["result"].settled for t in done):
                     break
     ok = [t for t in tried if t["ok"]]
-    # else: a settled result first, then one that stayed in place, then one on its supporters, then one that
-    # holds when tilted, then the closest to the corrected input
-    best = ok[0] if ok else min(tried, key=lambda t: (not t["result"].settled, not t["in_place"], not t["stayed"],
-                                                      not t["robust"], t["cost"]))
+    # else: no gross failure (a table flipped upside down, a chair thrown across the room) if any start avoided
+    # one, even one still moving when the settling window closed; then a settled result, then one that stayed in
+    # place, then one on its supporters, then one that holds when tilted, then the closest to the corrected input
+    best = ok[0] if ok else min(tried, key=lambda t: (t["gross"], not t["result"].settled, not t["in_place"],
+                                                      not t["stayed"], not t["robust"], t["cost"]))
     result = best["result"]
     if not best["ok"]:
         remedy = "closest"

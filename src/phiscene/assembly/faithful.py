@@ -44,7 +44,9 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    corrected pose shifted horizontally in ``shift_directions`` directions by
    steps of the slide bound up to ``max_shift`` (``shifted``, nearest first;
    its slide is measured from the shifted start; the first that stays in place
-   on its supporters ends the search). When none is accepted, the
+   on its supporters ends the search). When none is accepted, a result that is no gross failure (turned
+   past ``max_stable_angle`` or moved past ``onto_reach``: a table flipped over, a chair thrown across the
+   room) is preferred, even one still moving when the settling window closed; among those, the
    settled result that stayed in place (on its supporters if one did: the
    graph may name the wrong one), else one that holds
    when tilted, closest to the corrected input (:func:`closeness`), is taken

@@ -45,6 +45,14 @@ Choices the paper leaves open, and what we do:
   estimated wall is a degree or two off vertical, and its push along its normal, each time a
   neighbour pushes the object back into it, would ratchet the object upwards (measured on clutter:
   a plate 17 cm off the floor).
+* Gradient steps stop in a local minimum with a positive loss where the object is wedged between
+  neighbours (a chair's back inside a table top and the chair's seat under it): the pushes of the two
+  cancel. With ``search_directions > 0`` such a solve falls back to a direction search
+  (:func:`min_translation_search`): ``search_directions`` unit directions (horizontal only when
+  ``planar``) are marched out together in steps of ``search_step``, up to ``search_reach``; the first
+  translation with a zero loss is bisected back to the zero-loss boundary. That is the smallest
+  translation that clears the overlap, to the step's resolution, wherever the gradient stalls. The
+  paper's loop keeps it off (0).
 """
 
 from __future__ import annotations
@@ -78,6 +86,11 @@ class PenetrationParams(Params):
     optimizer
         ``adam`` (the paper's) or ``steepest`` (normalised gradient descent: steps of length ``lr`` along
         the steepest descent direction, per object).
+    search_directions
+        A solve that ends with a positive loss falls back to :func:`min_translation_search` over this many
+        directions (0 = off, the paper's loop).
+    search_step, search_reach
+        That search's step (m) and farthest translation (m).
     backtrack_steps
         Bisection steps that pull the last (overshooting) Adam step back to the
         zero-loss boundary; 0 = plain Adam.
@@ -98,6 +111,9 @@ class PenetrationParams(Params):
     max_iterations: int = 300
     backtrack_steps: int = 12
     optimizer: str = "adam"
+    search_directions: int = 0
+    search_step: float = 0.01
+    search_reach: float = 0.6
     ground_extreme_points: bool = True
     seed: int = 0
     grid: GridParams = field(default_factory=GridParams)
@@ -108,6 +124,9 @@ class PenetrationParams(Params):
             raise ValueError(f"penetration sample counts must be >= 1 and iteration counts >= 0: {self}")
         if self.eps < 0 or self.lr <= 0:
             raise ValueError(f"penetration eps must be >= 0 and lr > 0, got eps={self.eps}, lr={self.lr}")
+        if self.search_directions < 0 or self.search_step <= 0 or self.search_reach <= 0:
+            raise ValueError("penetration search_directions must be >= 0, search_step and search_reach > 0: "
+                             f"{self.search_directions}, {self.search_step}, {self.search_reach}")
         if self.optimizer not in OPTIMIZERS:
             raise ValueError(f"penetration optimizer must be one of {sorted(OPTIMIZERS)}, got {self.optimizer!r}")
 
@@ -338,14 +357,87 @@ def resolve_penetration(active: SdfBody, context: list[SdfBody], ground_height: 
         World translation to add to the active pose.
     info : dict
         ``iterations`` (Adam steps taken), ``initial_loss``, ``final_loss``, ``backtracked`` (bisection
-        steps used), ``context`` (ids that were ever within reach), ``seconds``.
+        steps used), ``context`` (ids that were ever within reach), ``searched`` (whether the direction
+        search replaced a stalled solve), ``seconds``.
     """
     t0 = time.perf_counter()
     loss_fn = _Loss(active, context, ground_height, params.eps, params.ground_extreme_points, planes, planar)
     x, info = minimize_hinge(loss_fn, (3,), params.lr, params.max_iterations, params.backtrack_steps,
                              params.optimizer)
+    info["searched"] = False
+    if info["final_loss"] > 0.0 and params.search_directions > 0:
+        base = np.zeros(3)
+        if planar and ground_height is not None:  # only the ground moves a floor-standing object vertically
+            base[2] = max(0.0, params.eps - (float(loss_fn.G.min()) - ground_height))
+        found = min_translation_search(loss_fn, base, search_directions(params.search_directions, planar),
+                                       params.search_step, params.search_reach, params.backtrack_steps)
+        if found is not None:
+            x = found
+            info.update(searched=True, final_loss=0.0)
     info.update(context=sorted(loss_fn.used), seconds=time.perf_counter() - t0)
     return x, info
+
+
+def search_directions(n: int, planar: bool = False) -> np.ndarray:
+    """``n`` unit directions (n, 3) spread evenly: over the sphere (a Fibonacci lattice), or over the horizontal
+    circle when ``planar``."""
+    k = np.arange(n, dtype=float)
+    if planar:
+        a = 2.0 * np.pi * k / max(n, 1)
+        return np.stack([np.cos(a), np.sin(a), np.zeros(n)], axis=1)
+    z = 1.0 - 2.0 * (k + 0.5) / n
+    r = np.sqrt(np.clip(1.0 - z * z, 0.0, None))
+    a = np.pi * (3.0 - np.sqrt(5.0)) * k
+    return np.stack([r * np.cos(a), r * np.sin(a), z], axis=1)
+
+
+def min_translation_search(loss_fn: Callable, base: np.ndarray, directions: np.ndarray, step: float, reach: float,
+                           bisect_steps: int) -> np.ndarray | None:
+    """The smallest translation ``base + t d`` (over the unit ``directions`` (k, 3), ``t`` in steps of ``step`` up
+    to ``reach``) at which ``loss_fn`` is exactly zero, bisected back to the zero-loss boundary.
+
+    Every direction is marched out together, so the first zero found is the nearest one (to within ``step``);
+    the march never stops inside a local minimum of the loss, where gradient steps stall.
+
+    Parameters
+    ----------
+    loss_fn
+        ``loss_fn(x) -> scalar tensor`` for a float64 tensor ``x`` (3,).
+    base : (3,) float
+        Where the rays start (e.g. the lift out of the ground).
+    directions : (k, 3) float
+    step, reach
+        March step and farthest ``t`` (m).
+    bisect_steps
+        Bisection steps between the last positive and the first zero ``t``.
+
+    Returns
+    -------
+    (3,) float translation, or ``None`` when no ray clears within ``reach``.
+    """
+    import torch
+
+    def loss(v: np.ndarray) -> float:
+        with torch.no_grad():
+            return float(loss_fn(torch.as_tensor(v, dtype=torch.float64)))
+
+    base = np.asarray(base, dtype=float)
+    if loss(base) == 0.0:
+        return base
+    n_steps = int(np.ceil(reach / step))
+    for i in range(1, n_steps + 1):
+        t = min(i * step, reach)
+        for d in directions:
+            if loss(base + t * d) == 0.0:
+                lo, hi = t - step, t
+                for _ in range(bisect_steps):
+                    mid = 0.5 * (lo + hi)
+                    if loss(base + mid * d) == 0.0:
+                        hi = mid
+                    else:
+                        lo = mid
+                return base + hi * d
+    return None
 
 
 def minimize_hinge(loss_fn: Callable, shape: tuple[int, ...], lr: float, max_iterations: int,

@@ -11,12 +11,15 @@ its footprint):
 
 * description: a wall or ceiling object (:data:`WALL_WORDS`, e.g. "poster", "painting", "curtain",
   "whiteboard", "ceiling fan") or an explicit "on the wall" / "hanging" phrase (:data:`MOUNT_PHRASES`);
-* geometry: a thin vertical panel (smallest extent <= ``thin_ratio`` times the largest, its thin axis
-  horizontal) whose bottom is at least ``min_height`` above the ground, or anything whose top is within
+* geometry: a thin vertical panel (:func:`panel_normal`: the smallest extent of its minimum-volume oriented box
+  <= ``thin_ratio`` times the largest, its thin axis within 30 degrees of horizontal, so a poster on a wall at any
+  heading counts) whose bottom is at least ``min_height`` above the ground, or anything whose top is within
   ``ceiling_gap`` of the highest point of the scene while its bottom is above ``min_height`` (a ceiling
   fixture), when the scene is a room (its height is at least ``room_height``).
 
-Objects resting on something stay free whatever their description says (a painting standing on a dresser), except
+Objects resting on something stay free whatever their description says (a painting standing on a dresser); a
+wall object other than a fixture holds nothing from below (posters overlapping on a wall do not hold each other
+up); except
 building fixtures (:data:`FIXTURE_WORDS`: windows, curtains, blinds), which are part of the room wherever they reach:
 a window above a radiator or a floor-length curtain is attached whatever is under it and however low it starts. The
 fixture word must name the object itself, in the description's head before its first preposition ("white curtains
@@ -34,7 +37,7 @@ from phiscene.params import Params
 from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph
 
 #: Words naming objects that are normally fixed to a wall or the ceiling.
-WALL_WORDS = ("poster", "painting", "picture", "artwork", "art", "frame", "framed", "window", "curtain", "curtains",
+WALL_WORDS = ("poster", "painting", "picture", "artwork", "art", "framed", "window", "curtain", "curtains",
               "blind", "blinds", "whiteboard", "blackboard", "chalkboard", "clock", "mirror", "fan", "chandelier",
               "sconce", "pendant", "canvas", "print", "photo", "photograph", "calendar", "board", "tapestry")
 #: Words naming building fixtures: attached wherever they reach (module docstring).
@@ -46,6 +49,8 @@ MOUNT_PHRASES = ("on the wall", "on wall", "wall mounted", "wall-mounted", "moun
                  "on the ceiling", "from the ceiling", "ceiling")
 #: Relation name of an attachment edge.
 ATTACHED = "attached"
+#: A panel's thin axis is at most this far (deg) from horizontal (:func:`panel_normal`).
+PANEL_TILT_DEG = 30.0
 
 
 @dataclass(frozen=True)
@@ -92,11 +97,14 @@ class AttachedParams(Params):
             raise ValueError("attachment 'thin_ratio' must be in (0, 1) and 'samples' >= 4")
 
 
+def names_wall_object(description: str) -> bool:
+    """Whether a description names a wall or ceiling object (a word of :data:`WALL_WORDS`)."""
+    return bool(set(re.findall(r"[a-z]+", description.lower())) & set(WALL_WORDS))
+
+
 def says_mounted(description: str) -> bool:
     """Whether a description names a wall/ceiling object or says it is mounted (:data:`WALL_WORDS`, phrases)."""
-    text = description.lower()
-    words = set(re.findall(r"[a-z]+", text))
-    return bool(words & set(WALL_WORDS)) or any(p in text for p in MOUNT_PHRASES)
+    return names_wall_object(description) or any(p in description.lower() for p in MOUNT_PHRASES)
 
 
 def head_words(description: str) -> list[str]:
@@ -115,8 +123,35 @@ def names_fixture(description: str) -> bool:
     return bool(set(head_words(description)) & set(FIXTURE_WORDS))
 
 
-def _held_from_below(scene, oid: str, world: dict, ground: float, params: AttachedParams) -> bool:
-    """Whether a surface (another object or the ground) lies within ``support_gap`` under ``oid``'s lowest points."""
+def panel_normal(mesh, thin_ratio: float) -> np.ndarray | None:
+    """The thin axis (3,) of a world-frame mesh that is a thin vertical panel, else ``None``.
+
+    A panel: the smallest extent of the minimum-volume oriented bounding box of its convex hull is at most
+    ``thin_ratio`` times the largest, and that thin axis lies within :data:`PANEL_TILT_DEG` of horizontal (a poster
+    or a picture on a wall at any heading; a board lying flat is not one).
+    """
+    import trimesh
+
+    points = np.asarray(mesh.convex_hull.vertices if len(mesh.vertices) > 3 else mesh.vertices, dtype=float)
+    try:
+        to_box, extents = trimesh.bounds.oriented_bounds(points)
+    except Exception:  # degenerate (flat or collinear) point sets: qhull and the OBB search both give up
+        return None
+    extents = np.asarray(extents, dtype=float)
+    k = int(np.argmin(extents))
+    if extents[k] > thin_ratio * extents.max():
+        return None
+    axis = np.linalg.inv(to_box)[:3, k]
+    axis = axis / np.linalg.norm(axis)
+    return axis if abs(axis[2]) <= np.sin(np.radians(PANEL_TILT_DEG)) else None
+
+
+def _held_from_below(scene, oid: str, world: dict, ground: float, params: AttachedParams,
+                     holds_nothing: frozenset = frozenset()) -> bool:
+    """Whether a surface (another object or the ground) lies within ``support_gap`` under ``oid``'s lowest points.
+
+    Objects in ``holds_nothing`` (wall objects that are not building fixtures) are not looked at.
+    """
     import trimesh
 
     mesh = world[oid]
@@ -128,7 +163,7 @@ def _held_from_below(scene, oid: str, world: dict, ground: float, params: Attach
     if len(v) > params.samples:
         v = v[np.linspace(0, len(v) - 1, params.samples).astype(int)]
     for other, m in world.items():
-        if other == oid:
+        if other == oid or other in holds_nothing:
             continue
         (ox0, oy0, oz0), (ox1, oy1, oz1) = m.bounds
         near = (v[:, 0] >= ox0) & (v[:, 0] <= ox1) & (v[:, 1] >= oy0) & (v[:, 1] <= oy1)
@@ -147,6 +182,11 @@ def _held_from_below(scene, oid: str, world: dict, ground: float, params: Attach
     return False
 
 
+def _text(obj) -> str:
+    """An object's description, or its id read as words."""
+    return obj.description or obj.id.replace("_", " ")
+
+
 def attached_objects(scene, params: AttachedParams = AttachedParams()) -> dict[str, str]:
     """Objects decided attached (module docstring) -> why (``fixture``, ``description``, ``panel`` or ``ceiling``).
 
@@ -159,23 +199,26 @@ def attached_objects(scene, params: AttachedParams = AttachedParams()) -> dict[s
     ground = float(scene.ground_height)
     top = max(float(m.bounds[1, 2]) for m in world.values())
     room = top - ground >= params.room_height
+    panels = frozenset(oid for oid, m in world.items() if panel_normal(m, params.thin_ratio) is not None)
+    # what holds nothing from below: wall objects other than building fixtures (posters overlapping on a wall;
+    # a window's sill or the top of a radiator does hold a plant)
+    holds_nothing = frozenset(o.id for o in scene.objects
+                              if names_wall_object(_text(o)) and not names_fixture(_text(o)))
     for o in scene.objects:
         if o.id in out:
             continue
-        if names_fixture(o.description or o.id.replace("_", " ")):
+        if names_fixture(_text(o)):
             out[o.id] = "fixture"
             continue
         m = world[o.id]
         lo, hi = m.bounds
-        ext = np.sort(hi - lo)
         if lo[2] - ground < params.min_height:
             continue
-        thin_axis = int(np.argmin(hi - lo))
-        panel = ext[0] <= params.thin_ratio * ext[2] and thin_axis != 2
+        panel = o.id in panels
         ceiling = room and top - hi[2] <= params.ceiling_gap
-        why = "description" if says_mounted(o.description or o.id.replace("_", " ")) else \
+        why = "description" if says_mounted(_text(o)) else \
             "panel" if panel else "ceiling" if ceiling else None
-        if why is None or _held_from_below(scene, o.id, world, ground, params):
+        if why is None or _held_from_below(scene, o.id, world, ground, params, holds_nothing):
             continue
         out[o.id] = why
     return out
