@@ -7,8 +7,8 @@ bumping one here after a behaviour change reruns exactly the affected jobs
 
 BENCHMARK = 2
 PROXIES = 2
-TOPOLOGY = 2
-GROUND = 4
+TOPOLOGY = 3
+GROUND = 5
 METRICS = 2
 TABLES = 2
 REPORT = 1
