@@ -106,3 +106,20 @@ def test_sdf_grid_of_a_dense_mesh_uses_a_decimated_copy_within_its_recorded_erro
     err = np.abs(grid.query_numpy(pts) - signed_distance_for(fruit)(pts))
     assert err.max() <= grid.error["max_abs"] * 1.5 + 1e-4
     assert grid.error["max_abs"] < 0.01  # under 1 cm on a 13 cm fruit
+
+
+def test_excess_is_how_far_the_proxies_reach_beyond_an_open_mesh():
+    """An open tray (a 0.4 m square bottom, 0.05 m walls, no lid): its one convex hull closes the top, whose
+    surface lies up to the depth from the mesh; the 95th percentile of that reach is the depth (over a fifth of
+    the hull's surface is the lid's middle, the depth from the bottom). Two hulls for two boxes reach nowhere."""
+    tray = trimesh.creation.box((0.4, 0.4, 0.05))
+    tray.update_faces(tray.face_normals[:, 2] < 0.5)  # drop the lid: open, not watertight
+    tray = open_dense(tray, 5000)
+    assert not tray.is_watertight
+    ratio, outside, excess = fidelity(tray, [np.asarray(tray.convex_hull.vertices)])
+    assert np.isnan(ratio) and outside < 1e-9
+    assert excess == pytest.approx(0.05, abs=2e-3)
+    boxes = [trimesh.creation.box((0.2, 0.2, 0.2)),
+             trimesh.creation.box((0.1, 0.1, 0.1)).apply_translation([0.3, 0, 0])]
+    _, _, tight = fidelity(trimesh.util.concatenate(boxes), [np.asarray(b.vertices) for b in boxes])
+    assert tight < 1e-9

@@ -87,6 +87,34 @@ def repair(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     return m
 
 
+#: Vertex budget of the hull the oriented bounding box is searched on (:func:`oriented_box`).
+OBB_HULL_VERTICES = 256
+
+
+def oriented_box(mesh: trimesh.Trimesh) -> trimesh.primitives.Box:
+    """The minimum-volume oriented bounding box of a mesh, searched on its capped convex hull.
+
+    trimesh's ``bounding_box_oriented`` tries every facet of the full convex hull: about 0.2 s for a
+    30,000-face scan whose hull has thousands of vertices. The hull capped at :data:`OBB_HULL_VERTICES`
+    (:func:`phiscene.proxies.capped_hull`) gives the same box to within a fraction of a millimetre on such
+    meshes, in a few milliseconds; the box is then grown to cover every vertex of the mesh.
+
+    Returns
+    -------
+    trimesh.primitives.Box
+        Its ``transform`` (4, 4) places the box centre and axes, ``extents`` (3,) are its side lengths.
+    """
+    from phiscene.proxies import capped_hull
+
+    points = capped_hull(mesh, OBB_HULL_VERTICES) if len(mesh.vertices) > OBB_HULL_VERTICES else mesh.vertices
+    to_box, _ = trimesh.bounds.oriented_bounds(np.asarray(points, dtype=float))
+    local = trimesh.transform_points(np.asarray(mesh.vertices, dtype=float), to_box)
+    lo, hi = local.min(axis=0), local.max(axis=0)
+    centre = np.eye(4)
+    centre[:3, 3] = 0.5 * (lo + hi)
+    return trimesh.primitives.Box(extents=hi - lo, transform=np.linalg.inv(to_box) @ centre)
+
+
 def sample_surface(mesh: trimesh.Trimesh, count: int, seed: int) -> np.ndarray:
     """Uniform, seeded surface samples.
 

@@ -26,8 +26,8 @@ def run_proxies(scene_path: str | Path, out_path: str | Path, params: dict, cach
     proxies = {}
     for o in scene.objects:
         px = proxies[o.id] = proxy_for_mesh(o.mesh_path, pp, cache_dir)
-        log.info("%s: %d hulls, volume ratio %.3f, max outside %.4f m, %.2f s", o.id, len(px.hulls),
-                 px.volume_ratio, px.max_outside, px.seconds)
+        log.info("%s: %d hulls, volume ratio %.3f, max outside %.4f m, excess %.4f m, %.2f s", o.id, len(px.hulls),
+                 px.volume_ratio, px.max_outside, px.excess, px.seconds)
     write_proxies(out_path, proxies)
 
 

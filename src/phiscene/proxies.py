@@ -30,7 +30,7 @@ from phiscene.params import Params
 log = logging.getLogger(__name__)
 
 #: Bump when the decomposition code changes in a way that changes results.
-PROXY_VERSION = 3
+PROXY_VERSION = 4
 #: Routes a decomposition can take (recorded in ``Proxy.meta["route"]``).
 ROUTES = ("convex", "single_hull", "decomposed")
 
@@ -109,6 +109,10 @@ class Proxy:
         Total hull volume / mesh volume (>= 1 for a covering decomposition; NaN for open meshes).
     max_outside
         Largest distance (m, unscaled) of a mesh surface sample outside every hull.
+    excess
+        How far the proxies reach beyond the mesh (m, unscaled): the 95th percentile of the distance from seeded
+        samples of the hulls' surfaces to the mesh surface. Defined for open meshes, where ``volume_ratio`` is
+        not (a coarse decomposition that fattens a chair leg or fills a bowl scores high; NaN when unknown).
     seconds
         Decomposition wall time.
     """
@@ -118,6 +122,7 @@ class Proxy:
     max_outside: float
     seconds: float = 0.0
     meta: dict = field(default_factory=dict)
+    excess: float = float("nan")
 
 
 def decimated(mesh: trimesh.Trimesh, max_faces: int) -> trimesh.Trimesh:
@@ -232,9 +237,11 @@ def _vhacd(mesh: trimesh.Trimesh, params: ProxyParams) -> list[np.ndarray]:
         return [np.asarray(g.vertices, dtype=float) for g in geoms]
 
 
-def fidelity(mesh: trimesh.Trimesh, hulls: list[np.ndarray], samples: int = 2048, seed: int = 0) -> tuple[float, float]:
-    """Volume ratio and max outside distance of a proxy set (see :class:`Proxy`)."""
+def fidelity(mesh: trimesh.Trimesh, hulls: list[np.ndarray], samples: int = 2048,
+             seed: int = 0) -> tuple[float, float, float]:
+    """Volume ratio, max outside distance and excess of a proxy set (see :class:`Proxy`)."""
     from phiscene.meshes import sample_surface
+    from phiscene.sdf import signed_distance_for
 
     hull_meshes = [trimesh.convex.convex_hull(h) for h in hulls]
     vol = sum(float(h.volume) for h in hull_meshes)
@@ -247,7 +254,9 @@ def fidelity(mesh: trimesh.Trimesh, hulls: list[np.ndarray], samples: int = 2048
         offsets = np.einsum("ij,ij->i", normals, h.triangles[:, 0])
         d = pts @ normals.T - offsets
         outside = np.minimum(outside, np.maximum(d.max(axis=1), 0.0))
-    return ratio, float(outside.max())
+    shell = trimesh.util.concatenate(hull_meshes)
+    reach = signed_distance_for(mesh).unsigned(sample_surface(shell, samples, seed))
+    return ratio, float(outside.max()), float(np.percentile(reach, 95))
 
 
 def proxy_for_mesh(mesh_file: str | Path, params: ProxyParams, cache_dir: str | Path) -> Proxy:
@@ -267,10 +276,11 @@ def proxy_for_mesh(mesh_file: str | Path, params: ProxyParams, cache_dir: str | 
         return cached
     t0 = time.perf_counter()
     hulls, route = decompose_route(mesh, params)
-    ratio, outside = fidelity(mesh, hulls)
-    proxy = Proxy(hulls=hulls, volume_ratio=ratio, max_outside=outside, seconds=time.perf_counter() - t0,
-                  meta={"mesh_hash": mh, "params_hash": ph, "content_hash": hulls_hash(hulls), "route": route,
-                        "faces": int(len(mesh.faces))})
+    ratio, outside, excess = fidelity(mesh, hulls)
+    meta = {"mesh_hash": mh, "params_hash": ph, "content_hash": hulls_hash(hulls), "route": route,
+            "faces": int(len(mesh.faces))}
+    proxy = Proxy(hulls=hulls, volume_ratio=ratio, max_outside=outside, excess=excess,
+                  seconds=time.perf_counter() - t0, meta=meta)
     write_proxies(path, {"_": proxy})
     return proxy
 
@@ -314,7 +324,7 @@ def write_proxies(path: str | Path, proxies: dict[str, Proxy]) -> None:
     index = {}
     for name, px in proxies.items():
         index[name] = {"n": len(px.hulls), "volume_ratio": px.volume_ratio, "max_outside": px.max_outside,
-                       "seconds": px.seconds, "meta": px.meta}
+                       "excess": px.excess, "seconds": px.seconds, "meta": px.meta}
         for k, h in enumerate(px.hulls):
             arrays[f"{name}/{k}"] = np.asarray(h, dtype=np.float64)
     arrays["__index__"] = np.frombuffer(json.dumps(index, allow_nan=True).encode(), dtype=np.uint8)
@@ -344,7 +354,8 @@ def read_proxies(path: str | Path) -> dict[str, Proxy]:
             for name, info in index.items():
                 hulls = [z[f"{name}/{k}"] for k in range(info["n"])]
                 out[name] = Proxy(hulls=hulls, volume_ratio=info["volume_ratio"], max_outside=info["max_outside"],
-                                  seconds=info.get("seconds", 0.0), meta=info.get("meta", {}))
+                                  seconds=info.get("seconds", 0.0), meta=info.get("meta", {}),
+                                  excess=info.get("excess", float("nan")))
     except Exception as exc:  # numpy and zipfile raise many types for a damaged archive
         raise InputError(path, None, f"not a readable proxies file ({type(exc).__name__}: {str(exc)[:120]})") from None
     return out

@@ -16,13 +16,14 @@ log = logging.getLogger("phiscene")
 
 
 def set_threads(threads: int) -> None:
-    """Limit every thread pool (BLAS, OpenMP, torch, open3d) of this process to ``threads``.
+    """Limit every thread pool (BLAS, OpenMP, torch, open3d, libigl) of this process to ``threads``.
 
     Two parallel jobs whose pools each take every core slow each other down;
     Snakemake's ``threads:`` is the budget of one job.
     """
     threads = max(1, int(threads))
-    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS"):
+    # libigl reads IGL_NUM_THREADS at its first parallel loop
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS", "IGL_NUM_THREADS"):
         os.environ[var] = str(threads)
     # numpy's BLAS is already loaded, so environment variables come too late for it
     from threadpoolctl import threadpool_limits

@@ -130,18 +130,17 @@ def panel_normal(mesh, thin_ratio: float) -> np.ndarray | None:
     ``thin_ratio`` times the largest, and that thin axis lies within :data:`PANEL_TILT_DEG` of horizontal (a poster
     or a picture on a wall at any heading; a board lying flat is not one).
     """
-    import trimesh
+    from phiscene.meshes import oriented_box
 
-    points = np.asarray(mesh.convex_hull.vertices if len(mesh.vertices) > 3 else mesh.vertices, dtype=float)
     try:
-        to_box, extents = trimesh.bounds.oriented_bounds(points)
+        box = oriented_box(mesh)
     except Exception:  # degenerate (flat or collinear) point sets: qhull and the OBB search both give up
         return None
-    extents = np.asarray(extents, dtype=float)
+    extents = np.asarray(box.primitive.extents, dtype=float)
     k = int(np.argmin(extents))
     if extents[k] > thin_ratio * extents.max():
         return None
-    axis = np.linalg.inv(to_box)[:3, k]
+    axis = np.asarray(box.primitive.transform, dtype=float)[:3, k]
     axis = axis / np.linalg.norm(axis)
     return axis if abs(axis[2]) <= np.sin(np.radians(PANEL_TILT_DEG)) else None
 
@@ -199,7 +198,6 @@ def attached_objects(scene, params: AttachedParams = AttachedParams()) -> dict[s
     ground = float(scene.ground_height)
     top = max(float(m.bounds[1, 2]) for m in world.values())
     room = top - ground >= params.room_height
-    panels = frozenset(oid for oid, m in world.items() if panel_normal(m, params.thin_ratio) is not None)
     # what holds nothing from below: wall objects other than building fixtures (posters overlapping on a wall;
     # a window's sill or the top of a radiator does hold a plant)
     holds_nothing = frozenset(o.id for o in scene.objects
@@ -214,10 +212,9 @@ def attached_objects(scene, params: AttachedParams = AttachedParams()) -> dict[s
         lo, hi = m.bounds
         if lo[2] - ground < params.min_height:
             continue
-        panel = o.id in panels
         ceiling = room and top - hi[2] <= params.ceiling_gap
         why = "description" if says_mounted(_text(o)) else \
-            "panel" if panel else "ceiling" if ceiling else None
+            "panel" if panel_normal(m, params.thin_ratio) is not None else "ceiling" if ceiling else None
         if why is None or _held_from_below(scene, o.id, world, ground, params, holds_nothing):
             continue
         out[o.id] = why

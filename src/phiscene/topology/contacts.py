@@ -166,6 +166,8 @@ def prepare_body(object_id: str, local_mesh, pose: np.ndarray, params: "Geometri
     """
     import trimesh
 
+    from phiscene.meshes import oriented_box
+
     mesh = local_mesh.copy()
     mesh.apply_transform(pose)
     area = float(mesh.area)
@@ -177,7 +179,7 @@ def prepare_body(object_id: str, local_mesh, pose: np.ndarray, params: "Geometri
     if solid and mesh.volume < 0:  # inside-out winding
         normals = -normals
     com = np.asarray(mesh.center_mass if solid and abs(mesh.volume) > 0 else mesh.centroid, dtype=float)
-    obb = mesh.bounding_box_oriented
+    obb = oriented_box(mesh)
     return Body(id=object_id, points=points, normals=normals, spacing=math.sqrt(area / n),
                 up=SurfacePart.build(points, normals[:, 2] >= params.up_cos),
                 side=SurfacePart.build(points, np.abs(normals[:, 2]) < params.up_cos),

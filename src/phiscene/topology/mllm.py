@@ -54,6 +54,7 @@ import numpy as np
 
 from phiscene.atomic import write_text
 from phiscene.errors import PhisceneError
+from phiscene.meshes import oriented_box
 from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph, check_graph
 from phiscene.topology.order import box_footprint_area, finalize
 from phiscene.topology.params import BackendParams
@@ -199,7 +200,7 @@ def object_metadata(scene) -> list[dict]:
     out = []
     for o in scene.objects:
         m = o.world_mesh()
-        obb = m.bounding_box_oriented
+        obb = oriented_box(m)
         T = np.asarray(obb.primitive.transform)
         corners = np.asarray(obb.vertices)
         try:

@@ -22,8 +22,8 @@ from phiscene.topology.graph import SupportEdge, SupportGraph
 def footprint_area(mesh) -> float:
     """Top-down footprint of a world-frame mesh: the area of its OBB projected onto the ground.
 
-    The oriented bounding box is trimesh's minimum-volume box of the mesh
-    (``mesh.bounding_box_oriented``); see :func:`box_footprint_area`.
+    The oriented bounding box is the minimum-volume box of the mesh (:func:`phiscene.meshes.oriented_box`); see
+    :func:`box_footprint_area`.
 
     Parameters
     ----------
@@ -35,7 +35,9 @@ def footprint_area(mesh) -> float:
     area : float
         Square metres.
     """
-    return box_footprint_area(np.asarray(mesh.bounding_box_oriented.vertices, dtype=float))
+    from phiscene.meshes import oriented_box
+
+    return box_footprint_area(np.asarray(oriented_box(mesh).vertices, dtype=float))
 
 
 def box_footprint_area(corners: np.ndarray) -> float:
