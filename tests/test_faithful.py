@@ -271,6 +271,37 @@ def test_tilt_test_tells_a_resting_box_from_one_balanced_on_the_edge(tmp_path, i
         assert np.allclose(world.pose("box"), before)  # put back
 
 
+@pytest.mark.parametrize("load_x, gives", [(0.05, True), (-0.05, False)])
+def test_a_carrier_over_a_shelf_edge_gives_way_under_a_load_beyond_the_edge(tmp_path, load_x, gives):
+    """Statics: a 0.2 m plank lies on a static shelf with its centre 2 cm inside the edge (x = 0), so alone it
+    stays; a box of three times its mass rests on it 5 cm beyond the edge: the pair's centre of mass is
+    (3 * 0.05 - 0.02) / 4 = 3.3 cm beyond the edge, and the plank tips when released under the box. The same box
+    5 cm inside the edge: the pair's centre is 4.3 cm inside, it holds. Frozen, the plank holds the box either way."""
+    from phiscene.assembly.settle import SettleParams, gives_way, settle_object
+    from phiscene.inertia import rigid_props
+    from phiscene.sim.bullet import BulletWorld
+
+    shelf, plank, load = (trimesh.creation.box(e) for e in ((0.4, 0.4, 0.1), (0.2, 0.1, 0.02), (0.1, 0.1, 0.12)))
+    with BulletWorld(SIM, tmp_path) as world:
+        world.add_ground(-1.0)
+        world.add_body("shelf", [np.asarray(shelf.vertices)], make_pose(translation=(-0.2, 0, 0.05)), None)
+        hulls = {"plank": [np.asarray(plank.vertices)], "load": [np.asarray(load.vertices)]}
+        props = {k: rigid_props(m, hulls[k], SIM.density, 1.0) for k, m in (("plank", plank), ("load", load))}
+        assert props["load"].mass == pytest.approx(3 * props["plank"].mass, rel=0.01)
+        world.add_body("plank", hulls["plank"], make_pose(translation=(-0.02, 0, 0.1105)), props["plank"])
+        assert settle_object(world, "plank", SettleParams()).settled
+        world.set_static("plank")
+        world.add_body("load", hulls["load"], make_pose(translation=(load_x, 0, 0.121 + 0.06 + 0.0005)),
+                       props["load"])
+        assert settle_object(world, "load", SettleParams()).settled  # on the frozen plank it rests
+        before = {b: world.pose(b) for b in ("plank", "load")}
+        moved = gives_way(world, "load", ["plank"], 60, 0.005, 1.0)
+        assert bool(moved) is gives and (not gives or "plank" in moved)
+        for b, pose in before.items():  # put back, the plank frozen again
+            np.testing.assert_allclose(world.pose(b), pose, atol=1e-9)
+        assert not world.bodies["plank"].dynamic
+
+
 @pytest.mark.parametrize("optimizer", ["adam", "steepest"])
 def test_penetration_solve_pushes_along_the_normal_with_steepest(tmp_path, optimizer):
     """A cube sunk 2 cm into a tilted wall: the smallest translation clearing it is (2 cm + eps) along the normal."""

@@ -24,7 +24,7 @@ import numpy as np
 from phiscene.assembly import faithful as fa
 from phiscene.assembly.faithful import FaithfulParams
 from phiscene.assembly.penetration import PenetrationParams, SdfBody, resolve_penetration, sdf_body
-from phiscene.assembly.settle import SettleParams, holds_when_tilted, settle_object, window_motion
+from phiscene.assembly.settle import SettleParams, gives_way, holds_when_tilted, settle_object, window_motion
 from phiscene.errors import InputError
 from phiscene.params import Params
 from phiscene.proxies import Proxy, check_proxies
@@ -196,6 +196,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                 t0 = time.perf_counter()
                 info = _faithful_info(scene, oid, obj, proxies.get(oid), graph, poses, world_meshes, cache_dir)
                 info["surfaces"] = lambda names: _surfaces(scene, poses, names, pp.seed, surfaces)
+                info["fixed"] = set(attached)  # static for good: never released under a load
                 carrier = next((q for q in info["below"] if q in poses), None)
                 if fp.carry and carrier is not None:
                     pose = fa.carried(pose, info["com"], np.asarray(scene.get(carrier).pose, float), poses[carrier])
@@ -491,14 +492,21 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         if result.settled and in_place and fp.tilt_test > 0 and not info["leaning"]:  # leaning: friction
             robust = holds_when_tilted(world, oid, fp.tilt_test, fp.tilt_frames, fp.joint_tol, fp.joint_tol_deg)
             frames += 4 * fp.tilt_frames
+        gave: list[str] = []  # the placed objects it touches, released under it, hold it
+        carriers = [q for q in near if q not in info["fixed"] and world.bodies[q].props is not None]
+        if result.settled and in_place and robust and fp.load_frames > 0 and carriers:
+            gave = gives_way(world, oid, carriers, fp.load_frames, fp.joint_tol, fp.joint_tol_deg)
+            frames += fp.load_frames
         whys = ["" if ok else f"moved {moved:.3f} m / {turned:.1f} deg",
                 f"lost supporters {lost}" if lost else "", "" if result.settled else "not settled",
-                "" if robust else f"marginal: tips when tilted {fp.tilt_test:g} deg"]
+                "" if robust else f"marginal: tips when tilted {fp.tilt_test:g} deg",
+                f"gives way when released: {gave}" if gave else ""]
         stayed = ok and not lost
         # a gross failure: turned beyond any resting pose tried, or went farther than the onto remedy moves
         gross = turned > fp.max_stable_angle or moved > fp.onto_reach
         out = {"label": label, "result": result, "frames": frames, "gross": gross,
-               "ok": stayed and result.settled and robust, "lost": bool(lost), "robust": robust,
+               "ok": stayed and result.settled and robust and not gave, "lost": bool(lost), "robust": robust,
+               "loaded": not gave,
                "stayed": stayed, "in_place": in_place, "travel": moved if not lost else math.inf,
                "cost": fa.closeness(pose, result.pose, info["com"], info["diag"], start=lowered) + fell,
                "why": "; ".join(w for w in whys if w), "touching": near}
@@ -513,10 +521,10 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                 break
         if not any(t["ok"] for t in tried):
             attempt("damped", pose, damped=True)
-        if not any(t["ok"] or (t["in_place"] and t["result"].settled and t["robust"]) for t in tried) \
-                and fp.onto_reach > 0:
-            # fell or slid off every time, or only balances on an edge: its input is off its supporter or
-            # over its edge (depth error); move it onto the nearest supporting surface of any placed object,
+        if not any(t["ok"] or (t["in_place"] and t["result"].settled and t["robust"] and t["loaded"])
+                   for t in tried) and fp.onto_reach > 0:
+            # fell or slid off every time, only balances on an edge or its carriers give way under it: its input
+            # is off its supporter or over its edge (depth error); move it onto the nearest supporting surface,
             # inside its edge (the graph may name the wrong supporter), from where the input put it: carried
             # by a supporter the graph got wrong, it may have gone far
             here = pose.copy()
@@ -537,9 +545,10 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
     ok = [t for t in tried if t["ok"]]
     # else: no gross failure (a table flipped upside down, a chair thrown across the room) if any start avoided
     # one, even one still moving when the settling window closed; then a settled result, then one that stayed in
-    # place, then one on its supporters, then one that holds when tilted, then the closest to the corrected input
+    # place, then one on its supporters, then one that holds when tilted, then one its carriers hold, then the
+    # closest to the corrected input
     best = ok[0] if ok else min(tried, key=lambda t: (t["gross"], not t["result"].settled, not t["in_place"],
-                                                      not t["stayed"], not t["robust"], t["cost"]))
+                                                      not t["stayed"], not t["robust"], not t["loaded"], t["cost"]))
     result = best["result"]
     if not best["ok"]:
         remedy = "closest"

@@ -26,6 +26,7 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    touches whatever lies beneath (never through it), then settled with the
    paper's settling. A result is accepted when it met the settling criterion,
    stays when gravity tilts by ``tilt_test`` degrees (no balancing on an edge),
+   the placed objects it touches hold it when they are released too (``load_frames``),
    its centre of mass moved horizontally at most the bound (``max_slide`` or
    ``max_slide_frac`` of the bounding-box diagonal, the smaller) and fell at
    most as much below its lowered start (an object that leaves its shelf for
@@ -138,6 +139,11 @@ class FaithfulParams(Params):
         at two contacts holds them, and a tilt tests that margin rather than their balance.
     tilt_frames
         Frames simulated per tilt direction.
+    load_frames
+        A settled result that passed the tilt test is accepted only if the placed objects it touches, released
+        under it for this many frames, hold it (:func:`~phiscene.assembly.settle.gives_way`: nothing moves more
+        than ``joint_tol`` / ``joint_tol_deg``); 0 = off. Sequential settling tests an object against a frozen
+        context, and the release of the whole scene is where a supporter that cannot carry its load collapses.
     contact_tol
         A supporter counts as kept when the object is within this distance of it at rest (m).
     retry_damping
@@ -175,6 +181,7 @@ class FaithfulParams(Params):
     max_candidates: int = 3
     tilt_test: float = 4.0
     tilt_frames: int = 60
+    load_frames: int = 60
     contact_tol: float = 0.004
     retry_damping: float = 0.9
     retry_rolling_friction: float = 0.1
@@ -187,7 +194,7 @@ class FaithfulParams(Params):
         for key in ("max_flush_angle", "max_stable_angle", "max_candidates", "tilt_test", "tilt_frames",
                     "joint_settle_frames", "joint_frames", "joint_tol", "joint_tol_deg", "max_slide",
                     "max_slide_frac", "max_turn", "contact_tol", "retry_rolling_friction", "max_shift",
-                    "shift_directions", "onto_reach", "planar_floor"):
+                    "shift_directions", "onto_reach", "planar_floor", "load_frames"):
             if getattr(self, key) < 0:
                 raise ValueError(f"faithful parameter {key!r} must be >= 0, got {getattr(self, key)}")
         if not 0.0 <= self.retry_damping < 1.0:

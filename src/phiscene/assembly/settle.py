@@ -255,3 +255,49 @@ def holds_when_tilted(world: BulletWorld, name: str, tilt_deg: float, frames: in
         world.set_gravity()
         world.set_pose(name, start)
     return held
+
+
+def gives_way(world: BulletWorld, name: str, carriers: list[str], frames: int, tol_pos: float,
+              tol_rot_deg: float) -> list[str]:
+    """Which of ``name`` and its ``carriers`` move when the carriers, frozen so far, are released under it.
+
+    Sequential settling tests an object against a frozen context: a book leaning on a box, a plank on the edge of
+    a stool, a box on a tray that overhangs its shelf, all hold there, and the whole scene collapses when it is
+    released. Here the carriers (the placed objects ``name`` touches) become dynamic with ``name`` at rest on
+    them and the world runs ``frames`` frames; a body that ends farther than ``tol_pos`` (m) or ``tol_rot_deg``
+    from where it was gives way. Poses are restored and the carriers frozen again.
+
+    Parameters
+    ----------
+    world
+        The world (``name`` dynamic and at rest, ``carriers`` static with their mass properties known).
+    name
+        The body just settled.
+    carriers
+        Static bodies to release under it.
+    frames
+        Frames simulated.
+    tol_pos, tol_rot_deg
+        How far a body may end from its pose (m, deg).
+
+    Returns
+    -------
+    The bodies that moved, ``name`` first when it did (empty: the carriers hold it).
+    """
+    bodies = [name, *carriers]
+    start = {b: world.pose(b) for b in bodies}
+    moved_out: list[str] = []
+    try:
+        for c in carriers:
+            world.set_dynamic(c)
+        world.step_frames(frames)
+        for b in bodies:
+            moved, turned = window_motion(start[b], world.pose(b))
+            if moved > tol_pos or np.degrees(turned) > tol_rot_deg:
+                moved_out.append(b)
+    finally:
+        for c in carriers:
+            world.set_static(c)
+        for b in bodies:
+            world.set_pose(b, start[b])
+    return moved_out

@@ -155,6 +155,7 @@ class _Body:
     scale: float
     inertial: np.ndarray  # (4, 4) COM frame in the scaled, unscaled-rotation link frame
     dynamic: bool
+    props: RigidProps | None = None  # what makes it dynamic again after set_static
 
 
 class BulletWorld:
@@ -253,7 +254,7 @@ class BulletWorld:
             self.p.changeDynamics(uid, -1, localInertiaDiagonal=props.principal_moments.tolist())
         self.p.changeDynamics(uid, -1, collisionMargin=self.settings.collision_margin)
         self._surface(uid)
-        self.bodies[name] = _Body(uid, scale, inertial, props is not None)
+        self.bodies[name] = _Body(uid, scale, inertial, props is not None, props)
         self.set_pose(name, pose)
         return uid
 
@@ -296,6 +297,22 @@ class BulletWorld:
         self.p.changeDynamics(b.uid, -1, mass=0.0)
         self.p.resetBaseVelocity(b.uid, [0, 0, 0], [0, 0, 0])
         b.dynamic = False
+
+    def set_dynamic(self, name: str) -> None:
+        """Release body ``name`` frozen by :meth:`set_static` (its mass and inertia back, at rest).
+
+        Raises
+        ------
+        ValueError
+            The body was added static (no mass properties to give back).
+        """
+        b = self.bodies[name]
+        if b.props is None:
+            raise ValueError(f"body {name!r} was added static")
+        self.p.changeDynamics(b.uid, -1, mass=float(b.props.mass),
+                              localInertiaDiagonal=b.props.principal_moments.tolist())
+        self.p.resetBaseVelocity(b.uid, [0, 0, 0], [0, 0, 0])
+        b.dynamic = True
 
     # -- stepping -----------------------------------------------------------------
     def step_frames(self, frames: int = 1) -> None:
