@@ -207,6 +207,34 @@ def test_direction_search_clears_where_gradient_steps_stall():
     assert min_translation_search(loss, np.zeros(3), search_directions(16, planar=True), 0.01, 0.05, 30) is None
 
 
+def test_plank_jammed_across_a_gap_turns_free(work):
+    """A 1 m plank whose two ends are each 1 cm inside a block from opposite sides (+x end from -y, -x end from +y,
+    the blocks covering 0.3-0.8 m from the centre): no short translation clears both (sideways pushes cancel,
+    out of the blocks lengthwise or over them is over 20 cm), a turn about z by (1 cm + eps) / 0.3 m does."""
+    plank = trimesh.creation.box((1.0, 0.04, 0.04))
+    block = trimesh.creation.box((0.5, 0.5, 0.4))
+    a = _body("a", block, make_pose(translation=(0.55, -0.25 - 0.01, 0.5)), work["cache"])  # y up to -0.01
+    b = _body("b", block, make_pose(translation=(-0.55, 0.25 + 0.01, 0.5)), work["cache"])  # y from +0.01
+    active = _body("plank", plank, make_pose(translation=(0, 0, 0.5)), work["cache"])
+    only, info = resolve_penetration(active, [a, b], None, PenetrationParams(optimizer="steepest"))
+    assert info["final_loss"] > 0 or np.linalg.norm(only) > 0.2
+    pp = PenetrationParams(optimizer="steepest", rotate_over=0.01)
+    x, info = resolve_penetration(active, [a, b], None, pp)
+    assert info["final_loss"] == 0.0
+    w = np.asarray(info["rotation"])
+    assert abs(w[0]) < 1e-3 and abs(w[1]) < 1e-3
+    assert w[2] == pytest.approx((0.01 + EPS) / 0.3, abs=0.01)  # counter-clockwise about z
+    assert np.linalg.norm(x) < 0.01
+    # the pose the assembly makes of it clears both blocks by eps, up to the grids' error
+    from phiscene.assembly.assemble import turned_about
+
+    pose = turned_about(active.pose, w, np.asarray(info["pivot"]))
+    pose[:3, 3] += x
+    moved = plank.copy().apply_transform(pose)
+    for body in (a, b):
+        assert clearance(moved, block.copy().apply_transform(body.pose)) > EPS - 2e-3
+
+
 def test_search_directions_are_unit_and_planar_ones_horizontal():
     sphere, ring = search_directions(32), search_directions(16, planar=True)
     np.testing.assert_allclose(np.linalg.norm(sphere, axis=1), 1.0)

@@ -212,7 +212,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                 planar = info is not None and _on_the_floor(obj.mesh(), pose, info, scene.ground_height,
                                                             fp.planar_floor)
                 pose = _resolve(oid, obj.mesh(), pose, placed, scene.ground_height, pp, cache_dir, rec,
-                                scene.structure, planar)
+                                scene.structure, planar, yaw_only=info is not None and bool(info["below"]))
             else:
                 rec.update(sdf_iterations=0, sdf_initial_loss=None, sdf_final_loss=None,
                            sdf_translation=[0.0, 0.0, 0.0], sdf_context=[], sdf_grid_error=None)
@@ -308,21 +308,41 @@ def _fix(world, oid: str, mesh, proxy: Proxy | None, pose: np.ndarray, sim: SimS
 
 
 def _resolve(oid: str, mesh, pose: np.ndarray, placed: list[SdfBody], ground_height: float,
-             pp: PenetrationParams, cache_dir: Path, rec: dict, planes=(), planar: bool = False) -> np.ndarray:
-    """SDF stage: the pose (4, 4) translated clear of ``placed``, the ground and ``planes``; fills ``rec``.
+             pp: PenetrationParams, cache_dir: Path, rec: dict, planes=(), planar: bool = False,
+             yaw_only: bool = False) -> np.ndarray:
+    """SDF stage: the pose (4, 4) moved clear of ``placed``, the ground and ``planes``; fills ``rec``.
 
-    ``planar``: pushed out of ``placed`` horizontally only (an object standing on the floor alone).
+    ``planar``: pushed out of ``placed`` horizontally only (an object standing on the floor alone);
+    ``yaw_only``: the rotation solve (``pp.rotate_over``) turns it about the vertical only.
     """
     active = sdf_body(oid, mesh, pose, pp.n_active, pp, cache_dir)
-    x, info = resolve_penetration(active, placed, ground_height, pp, planes, planar)
+    x, info = resolve_penetration(active, placed, ground_height, pp, planes, planar, yaw_only)
     rec.update(sdf_planar=planar, sdf_iterations=info["iterations"], sdf_initial_loss=_round(info["initial_loss"]),
                sdf_final_loss=_round(info["final_loss"]), sdf_searched=info["searched"],
-               sdf_translation=[_round(v) for v in x],
+               sdf_translation=[_round(v) for v in x], sdf_rotation=[_round(v) for v in info["rotation"]],
                sdf_context=info["context"],
                sdf_grid_error=_round(active.scale * active.grid.error.get("max_abs", float("nan"))))
-    out = pose.copy()
-    out[:3, 3] += x
+    return turned_about(pose, np.asarray(info["rotation"]), np.asarray(info["pivot"])) + _translation(x)
+
+
+def _translation(x: np.ndarray) -> np.ndarray:
+    """A (4, 4) matrix that adds the translation ``x`` (3,) when added to a pose."""
+    out = np.zeros((4, 4))
+    out[:3, 3] = x
     return out
+
+
+def turned_about(pose: np.ndarray, rotvec: np.ndarray, pivot: np.ndarray) -> np.ndarray:
+    """``pose`` (4, 4) turned by the rotation vector ``rotvec`` (3,, rad) about the world point ``pivot`` (3,)."""
+    from scipy.spatial.transform import Rotation
+
+    if not np.any(rotvec):
+        return pose.copy()
+    R = Rotation.from_rotvec(rotvec).as_matrix()
+    turn = np.eye(4)
+    turn[:3, :3] = R
+    turn[:3, 3] = pivot - R @ pivot
+    return turn @ pose
 
 
 def _on_the_floor(mesh, pose: np.ndarray, info: dict, ground_height: float, reach: float) -> bool:

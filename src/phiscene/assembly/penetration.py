@@ -53,6 +53,14 @@ Choices the paper leaves open, and what we do:
   translation with a zero loss is bisected back to the zero-loss boundary. That is the smallest
   translation that clears the overlap, to the step's resolution, wherever the gradient stalls. The
   paper's loop keeps it off (0).
+* Rotation where translation alone cannot do it (``rotate_over > 0``): a plank jammed across a gap,
+  each end inside a neighbour from opposite sides, clears by a small turn while a translation must slide
+  it out lengthwise. When the translation found is longer than ``rotate_over`` (or none clears), the same
+  loss is minimised over a translation ``x`` and a rotation vector ``w`` about the centroid ``c`` of the
+  active samples (``p -> R(w)(p - c) + c + x``; the context samples are moved by the inverse into the
+  active's frame), by normalised steps on ``(x, r w)`` with ``r`` the samples' RMS radius, so a step moves
+  the object's points by about ``lr`` either way. The smaller motion, ``|x| + r |w|``, wins. An object
+  standing on the floor alone turns about the vertical only.
 """
 
 from __future__ import annotations
@@ -91,6 +99,13 @@ class PenetrationParams(Params):
         directions (0 = off, the paper's loop).
     search_step, search_reach
         That search's step (m) and farthest translation (m).
+    rotate_over
+        When the translation that clears the overlap is longer than this (m), or none was found, a solve over
+        translation and rotation (about the active samples' centroid, :func:`resolve_penetration`) is tried too,
+        and the smaller motion wins (translation plus the arc the rotation sweeps at the samples' radius);
+        0 = translation only (the paper's loop).
+    max_rotation
+        Largest rotation (deg) that solve may apply.
     backtrack_steps
         Bisection steps that pull the last (overshooting) Adam step back to the
         zero-loss boundary; 0 = plain Adam.
@@ -114,6 +129,8 @@ class PenetrationParams(Params):
     search_directions: int = 0
     search_step: float = 0.01
     search_reach: float = 0.6
+    rotate_over: float = 0.0
+    max_rotation: float = 15.0
     ground_extreme_points: bool = True
     seed: int = 0
     grid: GridParams = field(default_factory=GridParams)
@@ -124,6 +141,9 @@ class PenetrationParams(Params):
             raise ValueError(f"penetration sample counts must be >= 1 and iteration counts >= 0: {self}")
         if self.eps < 0 or self.lr <= 0:
             raise ValueError(f"penetration eps must be >= 0 and lr > 0, got eps={self.eps}, lr={self.lr}")
+        if self.rotate_over < 0 or not 0 < self.max_rotation <= 90:
+            raise ValueError(f"penetration rotate_over must be >= 0 and max_rotation in (0, 90]: {self.rotate_over}, "
+                             f"{self.max_rotation}")
         if self.search_directions < 0 or self.search_step <= 0 or self.search_reach <= 0:
             raise ValueError("penetration search_directions must be >= 0, search_step and search_reach > 0: "
                              f"{self.search_directions}, {self.search_step}, {self.search_reach}")
@@ -222,7 +242,7 @@ class _Loss:
     """The clearance loss of one active body against a fixed context and the ground."""
 
     def __init__(self, active: SdfBody, context: list[SdfBody], ground_height: float | None, eps: float,
-                 extreme_points: bool, planes=(), planar: bool = False):
+                 extreme_points: bool, planes=(), planar: bool = False, yaw_only: bool = False):
         import torch
 
         self.active, self.context, self.eps = active, context, eps
@@ -233,9 +253,17 @@ class _Loss:
         ground_pts = np.vstack([active.samples(), active.hull()]) if extreme_points else active.samples()
         self.G = torch.as_tensor(ground_pts[:, 2])
         # walls and ceiling: half-spaces like the ground, analytic SDF n . p + d on the same points
+        # (distances of the ground points, normal, offset) per plane
         self.planes = [(torch.as_tensor(ground_pts @ np.asarray(p.normal, dtype=float) + p.offset),
-                        torch.as_tensor(np.asarray(p.normal, dtype=float))) for p in planes]
+                        torch.as_tensor(np.asarray(p.normal, dtype=float)), float(p.offset)) for p in planes]
         self.Q = [torch.as_tensor(k.samples()) for k in context]
+        #: pivot of the rotation (the active samples' centroid) and the ground/plane points and hull, world frame
+        self.pivot = torch.as_tensor(active.samples().mean(axis=0))
+        self.ground_points = torch.as_tensor(ground_pts)
+        self.hull_world = active.hull()
+        self.planar = planar
+        #: the rotation solve turns about the vertical only (a floor-standing or supported object stays flush)
+        self.yaw_only = planar or yaw_only
         self.aabb_active = active.aabb()
         self.aabbs = [k.aabb() for k in context]
         # grid lookups are >= exact SDF - cell diagonal, and the exact SDF between points of two boxes is
@@ -248,7 +276,41 @@ class _Loss:
         box = self.aabb_active + x
         return [i for i, (b, r) in enumerate(zip(self.aabbs, self.reach)) if aabb_gap(box, b) <= r]
 
-    def __call__(self, x):
+    def __call__(self, x, w=None):
+        """The loss at translation ``x`` (3,) and, when given, rotation vector ``w`` (3,) about :attr:`pivot`."""
+        import torch
+
+        if w is None:
+            return self._translated(x)
+        eps = self.eps
+        if self.yaw_only:  # an object on the floor or on a supporter turns about the vertical only
+            w = w * torch.tensor([0.0, 0.0, 1.0], dtype=w.dtype)
+        R = torch.linalg.matrix_exp(_skew(w))
+        c = self.pivot
+        total = x.new_zeros(())
+        gp = (self.ground_points - c) @ R.T + c + x
+        if self.ground_height is not None:
+            total = total + torch.relu(eps - (gp[:, 2] - self.ground_height)).sum()
+        x = x * self.mask + (x * (1.0 - self.mask)).detach()  # planar: only the ground pushes vertically
+        gp = (self.ground_points - c) @ R.T + c + x
+        for _, normal, offset in self.planes:
+            total = total + torch.relu(eps - (gp @ normal + offset)).sum()
+        Rn = R.detach().numpy()
+        hull = (self.hull_world - c.numpy()) @ Rn.T + c.numpy() + x.detach().numpy()
+        box = np.stack([hull.min(axis=0), hull.max(axis=0)])
+        idx = [i for i, (b, r) in enumerate(zip(self.aabbs, self.reach)) if aabb_gap(box, b) <= r]
+        if idx:
+            self.used.update(self.context[i].id for i in idx)
+            moved = (self.P - c) @ R.T + c + x
+            for i in idx:
+                k = self.context[i]
+                total = total + torch.relu(eps - k.grid.query(moved, k.pose)).sum()
+            Q = torch.cat([self.Q[i] for i in idx])
+            back = (Q - c - x) @ R + c  # the inverse motion, into the active's unmoved frame
+            total = total + torch.relu(eps - self.active.grid.query(back, self.active.pose)).sum()
+        return total
+
+    def _translated(self, x):
         import torch
 
         eps = self.eps
@@ -256,7 +318,7 @@ class _Loss:
         if self.ground_height is not None:
             total = total + torch.relu(eps - (self.G + x[2] - self.ground_height)).sum()
         x = x * self.mask + (x * (1.0 - self.mask)).detach()  # planar: only the ground pushes vertically
-        for dist, normal in self.planes:
+        for dist, normal, _ in self.planes:
             total = total + torch.relu(eps - (dist + x @ normal)).sum()
         idx = self.near(x.detach().numpy())
         if idx:
@@ -268,6 +330,15 @@ class _Loss:
             Q = torch.cat([self.Q[i] for i in idx]) - x
             total = total + torch.relu(eps - self.active.grid.query(Q, self.active.pose)).sum()
         return total
+
+
+def _skew(w):
+    """The cross-product matrix (3, 3) of a torch vector ``w`` (3,), differentiable."""
+    import torch
+
+    z = w.new_zeros(())
+    return torch.stack([torch.stack([z, -w[2], w[1]]), torch.stack([w[2], z, -w[0]]),
+                        torch.stack([-w[1], w[0], z])])
 
 
 class AdamState:
@@ -326,12 +397,37 @@ class SteepestState:
         self.param.grad = None
 
 
+class SteepestJointState:
+    """Normalised gradient descent on the whole of ``param``: it moves by ``lr`` along its steepest descent
+    direction (the translation-and-rotation solve, where per-row normalisation would always turn and slide).
+
+    Parameters are those of :class:`AdamState`.
+    """
+
+    def __init__(self, param, lr: float):
+        self.param, self.lr = param, lr
+
+    def step(self) -> None:
+        """One step from ``param.grad`` (then cleared); a zero gradient stays."""
+        import torch
+
+        with torch.no_grad():
+            g = self.param.grad
+            norm = torch.linalg.vector_norm(g)
+            if float(norm) > 0:
+                self.param -= self.lr * g / norm
+        self.param.grad = None
+
+
 #: Optimizers of the penetration solve, by ``PenetrationParams.optimizer``.
 OPTIMIZERS = {"adam": AdamState, "steepest": SteepestState}
+#: Optimizers :func:`minimize_hinge` knows besides the configurable ones (the translation-and-rotation solve's).
+_SOLVERS = {**OPTIMIZERS, "steepest_joint": SteepestJointState}
 
 
 def resolve_penetration(active: SdfBody, context: list[SdfBody], ground_height: float | None,
-                        params: PenetrationParams, planes=(), planar: bool = False) -> tuple[np.ndarray, dict]:
+                        params: PenetrationParams, planes=(), planar: bool = False,
+                        yaw_only: bool = False) -> tuple[np.ndarray, dict]:
     """Translation of ``active`` that clears its settled context, the ground and the walls by ``eps``.
 
     Parameters
@@ -349,7 +445,10 @@ def resolve_penetration(active: SdfBody, context: list[SdfBody], ground_height: 
         analytic SDF ``n . p + d``, on the same points as the ground term.
     planar
         Clear the context objects and the walls by horizontal motion only (the translation's vertical part
-        moves the object out of the ground only); see the module notes.
+        moves the object out of the ground only); see the module notes. Implies ``yaw_only``.
+    yaw_only
+        The rotation solve (``params.rotate_over``) turns the object about the vertical only (an object resting
+        on a supporter, made flush with it, stays flush).
 
     Returns
     -------
@@ -358,10 +457,12 @@ def resolve_penetration(active: SdfBody, context: list[SdfBody], ground_height: 
     info : dict
         ``iterations`` (Adam steps taken), ``initial_loss``, ``final_loss``, ``backtracked`` (bisection
         steps used), ``context`` (ids that were ever within reach), ``searched`` (whether the direction
-        search replaced a stalled solve), ``seconds``.
+        search replaced a stalled solve), ``rotation`` (3,) rotation vector (rad) applied about ``pivot`` (3,)
+        before the translation (zero unless the rotation solve won), ``seconds``.
     """
     t0 = time.perf_counter()
-    loss_fn = _Loss(active, context, ground_height, params.eps, params.ground_extreme_points, planes, planar)
+    loss_fn = _Loss(active, context, ground_height, params.eps, params.ground_extreme_points, planes, planar,
+                    yaw_only)
     x, info = minimize_hinge(loss_fn, (3,), params.lr, params.max_iterations, params.backtrack_steps,
                              params.optimizer)
     info["searched"] = False
@@ -374,8 +475,43 @@ def resolve_penetration(active: SdfBody, context: list[SdfBody], ground_height: 
         if found is not None:
             x = found
             info.update(searched=True, final_loss=0.0)
+    info["rotation"] = [0.0, 0.0, 0.0]
+    info["pivot"] = [float(v) for v in loss_fn.pivot]
+    if params.rotate_over > 0 and (info["final_loss"] > 0.0 or float(np.linalg.norm(x)) > params.rotate_over):
+        xr, wr, rinfo = _rigid_solve(loss_fn, params)
+        radius = rinfo["radius"]
+        cost_t = float(np.linalg.norm(x)) if info["final_loss"] == 0.0 else np.inf
+        cost_r = float(np.linalg.norm(xr) + radius * np.linalg.norm(wr))
+        if rinfo["final_loss"] == 0.0 and cost_r < cost_t \
+                and np.degrees(np.linalg.norm(wr)) <= params.max_rotation:
+            x = xr
+            info.update(rotation=[float(v) for v in wr], final_loss=0.0, iterations=info["iterations"]
+                        + rinfo["iterations"])
     info.update(context=sorted(loss_fn.used), seconds=time.perf_counter() - t0)
     return x, info
+
+
+def _rigid_solve(loss_fn: "_Loss", params: PenetrationParams) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Minimise the clearance loss over a translation and a rotation about ``loss_fn.pivot`` (module notes).
+
+    Returns
+    -------
+    x : (3,) float, w : (3,) float rotation vector (rad), info : ``iterations``, ``final_loss``, ``radius`` (m)
+    """
+    import torch
+
+    radius = float(torch.sqrt(((loss_fn.P - loss_fn.pivot) ** 2).sum(dim=1).mean()))
+    radius = max(radius, 1e-3)
+
+    def loss6(v):
+        return loss_fn(v[:3], v[3:] / radius)
+
+    v, info = minimize_hinge(loss6, (6,), params.lr, params.max_iterations, params.backtrack_steps, "steepest_joint")
+    info["radius"] = radius
+    w = v[3:] / radius
+    if loss_fn.yaw_only:
+        w = w * np.array([0.0, 0.0, 1.0])
+    return v[:3], w, info
 
 
 def search_directions(n: int, planar: bool = False) -> np.ndarray:
@@ -458,7 +594,7 @@ def minimize_hinge(loss_fn: Callable, shape: tuple[int, ...], lr: float, max_ite
     lr, max_iterations, backtrack_steps
         Learning rate (step length for ``steepest``), iteration cap and bisection steps.
     optimizer
-        A key of :data:`OPTIMIZERS`.
+        A key of :data:`OPTIMIZERS`, or ``steepest_joint`` (:class:`SteepestJointState`).
 
     Returns
     -------
@@ -470,7 +606,7 @@ def minimize_hinge(loss_fn: Callable, shape: tuple[int, ...], lr: float, max_ite
     import torch
 
     x = torch.zeros(shape, dtype=torch.float64, requires_grad=True)
-    opt = OPTIMIZERS[optimizer](x, lr)
+    opt = _SOLVERS[optimizer](x, lr)
     loss = loss_fn(x)
     initial = float(loss.detach())
     iterations = 0
