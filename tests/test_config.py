@@ -58,8 +58,8 @@ def test_deep_merge_merges_every_level_and_copies():
 
 
 def _shifted(section: dict) -> dict:
-    """Every number and choice of a config section changed (ints + 1, floats halved, choices swapped), so no value
-    equals a dataclass default."""
+    """Every number and choice of a config section changed (ints + 1, floats halved or, at 0, set to 0.25, choices
+    swapped), so no value equals a dataclass default."""
     swap = {"adam": "steepest"}
     out = {}
     for key, value in section.items():
@@ -70,7 +70,7 @@ def _shifted(section: dict) -> dict:
         elif isinstance(value, bool) or not isinstance(value, (int, float)):
             out[key] = value
         else:
-            out[key] = value + 1 if isinstance(value, int) else value * 0.5
+            out[key] = value + 1 if isinstance(value, int) else (value * 0.5 if value else 0.25)
     return out
 
 
