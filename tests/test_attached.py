@@ -139,3 +139,21 @@ def test_poster_stays_put_and_is_left_out_of_drift(room):
     assert phys["drift_trans"] == pytest.approx(float(np.mean(free)))
     mj = drift_mujoco(out, proxies, PhysicalParams(samples=256), SIM)
     assert mj["objects"]["lamp"]["attached"] == "ground" and mj["drift_trans"] < 0.01
+
+
+def test_an_attached_curtain_through_the_floor_does_not_lower_the_drift_ground(tmp_path):
+    """The drift tests release a scene on a ground right below it; an attached curtain reconstructed 6 cm through
+    the floor is static there and must not set that ground: a box resting on the floor stays put in both
+    simulators (with the curtain setting it, the box would fall 6 cm)."""
+    boxes = {"box": (0.3, 0.3, 0.3), "curtain": (1.0, 0.02, 2.0)}
+    mesh = {n: save_mesh(trimesh.creation.box(s), tmp_path / f"{n}.obj") for n, s in boxes.items()}
+    scene = Scene([SceneObject("box", mesh["box"], make_pose(translation=[0, 0, 0.15]), "cardboard box"),
+                   SceneObject("curtain", mesh["curtain"], make_pose(translation=[1.0, 1.0, 1.0 - 0.06]),
+                               "white curtain", attached="ground")])
+    proxies = scene_proxies(scene, ProxyParams(backend="convex"), tmp_path / "cache")
+    params = PhysicalParams(samples=256)
+    phys = physical_metrics(scene, proxies, params, SIM, tmp_path / "cache")
+    assert phys["ground_below"] == pytest.approx(0.0, abs=1e-9)
+    assert phys["objects"]["box"]["drift_trans"] < 1e-3
+    mj = drift_mujoco(scene, proxies, params, SIM)
+    assert mj["ground_below"] == pytest.approx(0.0, abs=1e-9) and mj["objects"]["box"]["drift_trans"] < 1e-3

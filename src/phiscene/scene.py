@@ -172,10 +172,13 @@ class Scene:
 
 
 def ground_below(scene: Scene) -> float:
-    """Height of a ground right below the scene: the lowest world z of all object meshes (m).
+    """Height of a ground right below the scene: the lowest world z of the free objects' meshes (m).
 
     The drift tests of every simulator release the scene on this ground (not ``scene.ground_height``),
-    so a scene floating above, or sunk into, its own ground plane is measured from where it rests.
+    so a scene floating above, or sunk into, its own ground plane is measured from where it rests. Objects
+    :attr:`~SceneObject.attached` to a wall or the ceiling are static in those tests and do not set it (a
+    floor-length curtain reconstructed 6 cm through the floor would drop every free object 6 cm); when every
+    object is attached, all of them do.
 
     Raises
     ------
@@ -184,7 +187,8 @@ def ground_below(scene: Scene) -> float:
     """
     if not scene.objects:
         raise InputError(scene.source, "objects", "scene has no objects")
-    return float(min(transform_points(o.pose, o.mesh().vertices)[:, 2].min() for o in scene.objects))
+    free = [o for o in scene.objects if o.attached is None] or scene.objects
+    return float(min(transform_points(o.pose, o.mesh().vertices)[:, 2].min() for o in free))
 
 
 def _rel(target: Path, start: Path) -> str:
