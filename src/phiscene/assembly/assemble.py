@@ -322,13 +322,8 @@ def _resolve(oid: str, mesh, pose: np.ndarray, placed: list[SdfBody], ground_hei
                sdf_translation=[_round(v) for v in x], sdf_rotation=[_round(v) for v in info["rotation"]],
                sdf_context=info["context"],
                sdf_grid_error=_round(active.scale * active.grid.error.get("max_abs", float("nan"))))
-    return turned_about(pose, np.asarray(info["rotation"]), np.asarray(info["pivot"])) + _translation(x)
-
-
-def _translation(x: np.ndarray) -> np.ndarray:
-    """A (4, 4) matrix that adds the translation ``x`` (3,) when added to a pose."""
-    out = np.zeros((4, 4))
-    out[:3, 3] = x
+    out = turned_about(pose, np.asarray(info["rotation"]), np.asarray(info["pivot"]))
+    out[:3, 3] += x
     return out
 
 
