@@ -107,6 +107,24 @@ def test_floating_box_drifts_by_its_gap(tmp_path):
     assert out["drift_trans"] == pytest.approx(np.mean([v["drift_trans"] for v in out["objects"].values()]))
 
 
+def test_drift_ground_is_below_the_collision_proxies_not_a_mesh_tip_outside_them(tmp_path):
+    """A chair leg's tip 7 mm through the floor, outside its proxy (which rests on the floor): the simulators never
+    see that tip, so the drift ground stays at the floor and a box resting on it stays (a ground at the tip would
+    drop every object 7 mm)."""
+    from phiscene.proxies import Proxy
+
+    leg = box(0.1, 0.1, 0.307)  # mesh from z = -0.007 ...
+    scene = write_scene(tmp_path, [("leg", leg, at(0.0, 0.0, 0.1535 - 0.007)),
+                                   ("box", box(0.2, 0.2, 0.2), at(0.5, 0.0, 0.1))])
+    proxies = proxies_of(scene, tmp_path)
+    local = np.asarray(leg.vertices, dtype=float).copy()  # ... its proxy from z = 0
+    local[:, 2] = np.maximum(local[:, 2], -0.1535 + 0.007)
+    proxies["leg"] = Proxy(hulls=[local], volume_ratio=1.0, max_outside=0.007)
+    out = drift_bullet(scene, proxies, PhysicalParams(), SIM, tmp_path / "cache")
+    assert out["ground_below"] == pytest.approx(0.0, abs=1e-8)  # GLB stores float32 vertices
+    assert out["objects"]["box"]["drift_trans"] < 1e-3 and out["objects"]["leg"]["drift_trans"] < 1e-3
+
+
 def test_toppling_box_rotates(tmp_path):
     # a tall board standing on one edge, tilted 30 deg from vertical (past its 9.5 deg tipping angle):
     # it falls flat onto its broad face, 60 deg further; rolling about the ground edge without slip, its

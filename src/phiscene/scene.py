@@ -171,14 +171,17 @@ class Scene:
         return out
 
 
-def ground_below(scene: Scene) -> float:
-    """Height of a ground right below the scene: the lowest world z of the free objects' meshes (m).
+def ground_below(scene: Scene, proxies: dict | None = None) -> float:
+    """Height of a ground right below the scene: the lowest world z of what the free objects collide with (m).
 
     The drift tests of every simulator release the scene on this ground (not ``scene.ground_height``),
-    so a scene floating above, or sunk into, its own ground plane is measured from where it rests. Objects
-    :attr:`~SceneObject.attached` to a wall or the ceiling are static in those tests and do not set it (a
-    floor-length curtain reconstructed 6 cm through the floor would drop every free object 6 cm); when every
-    object is attached, all of them do.
+    so a scene floating above, or sunk into, its own ground plane is measured from where it rests. With
+    ``proxies`` (object id -> :class:`~phiscene.proxies.Proxy`) it is the lowest vertex of the free objects'
+    collision proxies, the only geometry the simulators see: a mesh vertex a few millimetres outside its proxies
+    (a chair leg's tip through the floor) would lower the ground under every object and drop them all by that
+    much; without, the lowest vertex of their meshes. Objects :attr:`~SceneObject.attached` to a wall or the
+    ceiling are static in those tests and do not set it (a floor-length curtain reconstructed 6 cm through the
+    floor would drop every free object 6 cm); when every object is attached, all of them do.
 
     Raises
     ------
@@ -188,7 +191,13 @@ def ground_below(scene: Scene) -> float:
     if not scene.objects:
         raise InputError(scene.source, "objects", "scene has no objects")
     free = [o for o in scene.objects if o.attached is None] or scene.objects
-    return float(min(transform_points(o.pose, o.mesh().vertices)[:, 2].min() for o in free))
+
+    def points(o: SceneObject) -> np.ndarray:
+        if proxies is not None and o.id in proxies and proxies[o.id].hulls:
+            return np.vstack(proxies[o.id].hulls)
+        return np.asarray(o.mesh().vertices)
+
+    return float(min(transform_points(o.pose, points(o))[:, 2].min() for o in free))
 
 
 def _rel(target: Path, start: Path) -> str:

@@ -150,7 +150,7 @@ def drift_bullet(scene: "Scene", proxies: dict[str, "Proxy"], params: DriftParam
 
     check_proxies(scene, proxies)
     offset = np.array([0.0, 0.0, float(params.upward_offset)])
-    floor = ground_below(scene)
+    floor = ground_below(scene, proxies)
     with BulletWorld(sim, cache_dir) as world:
         world.add_ground(floor)
         world.add_structure(scene.structure)  # walls and ceiling: static colliders (a leaning board stays up)
@@ -220,7 +220,7 @@ def drift_mujoco(scene: "Scene", proxies: dict[str, "Proxy"], params: DriftParam
         raise ValueError(f"frames must be >= 0, got {params.frames}")
     lift = make_pose(translation=[0.0, 0.0, offset])
     lifted = scene.with_poses({o.id: lift @ o.pose for o in scene.objects if o.attached is None})
-    floor = ground_below(scene)
+    floor = ground_below(scene, proxies)
     spec = build_spec(lifted, proxies, sim, floor, mj)
     model = compile_model(spec, sim)
     data = mujoco.MjData(model)

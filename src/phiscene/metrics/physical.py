@@ -30,7 +30,8 @@ Static contact validity
 Post-simulation drift (pybullet)
     All objects are released together as dynamic compounds of their convex
     proxies (mass properties at ``SimSettings.density``) above a ground box
-    whose top is the lowest world z of the free (not attached) objects' meshes, after lifting every
+    whose top is the lowest world z of the free (not attached) objects' collision proxies
+    (:func:`phiscene.scene.ground_below`), after lifting every
     object by ``upward_offset``; the world runs ``frames`` frames. Translation
     drift is the distance between the final centre of mass and the original
     one (the lifted one minus the offset); rotation drift is the relative

@@ -4,8 +4,8 @@ This module builds, compiles and steps the worlds; the drift metric itself is
 :func:`phiscene.metrics.drift.drift_mujoco`. The drift protocol is the one of the pybullet drift (paper supplement,
 "Post-simulation stability"): every object is a free body, all dynamic
 together; a ground plane is placed right below the scene (its top at the
-lowest world z of the free objects' meshes, :func:`phiscene.scene.ground_below`); every object is lifted by a small
-upward offset so that it settles down into contact; the world runs
+lowest world z of the free objects' collision proxies, :func:`phiscene.scene.ground_below`); every object is
+lifted by a small upward offset so that it settles down into contact; the world runs
 ``frames`` frames of ``SimSettings.frame_dt``; translation drift is the
 distance between the final centre of mass and the original (pre-lift) one,
 rotation drift the relative rotation angle in degrees; scene drift is the
