@@ -302,6 +302,41 @@ def test_a_carrier_over_a_shelf_edge_gives_way_under_a_load_beyond_the_edge(tmp_
         assert not world.bodies["plank"].dynamic
 
 
+@pytest.mark.parametrize("depth, gives", [(1, False), (2, True)])
+def test_a_stack_that_tips_at_its_base_is_seen_two_levels_down(tmp_path, depth, gives):
+    """Statics, per unit density and depth 0.1 m: a plank P (0.2 x 0.02, mass 4) lies on a static shelf whose edge
+    is x = 0, its centre at x = -0.02; a board B (0.12 x 0.02, mass 2.4) on it at x = 0.01 (P and B: centre
+    (-0.08 + 0.024) / 6.4 = -0.9 cm, inside: they stay); a box L (0.06 x 0.06, mass 3.6) on B at x = 0.05. On a
+    frozen P, B and L hold (their centre, 3.4 cm, lies over P, which reaches 8 cm); released together the three
+    have their centre at (-0.08 + 0.024 + 0.18) / 10 = +1.24 cm, beyond the edge: P tips. The load test sees it
+    only when it releases B's supporter P too (depth 2); the carriers are B, then P, never the static shelf."""
+    from phiscene.assembly.settle import SettleParams, gives_way, load_carriers, settle_object
+    from phiscene.inertia import rigid_props
+    from phiscene.sim.bullet import BulletWorld
+
+    sizes = {"P": (0.2, 0.1, 0.02), "B": (0.12, 0.1, 0.02), "L": (0.06, 0.1, 0.06)}
+    centres = {"P": (-0.02, 0, 0.11), "B": (0.01, 0, 0.13), "L": (0.05, 0, 0.17)}
+    with BulletWorld(SIM, tmp_path) as world:
+        world.add_ground(-1.0)
+        shelf = trimesh.creation.box((0.4, 0.4, 0.1))
+        world.add_body("shelf", [np.asarray(shelf.vertices)], make_pose(translation=(-0.2, 0, 0.05)), None)
+        for name in ("P", "B", "L"):
+            m = trimesh.creation.box(sizes[name])
+            hulls = [np.asarray(m.vertices)]
+            x, y, z = centres[name]
+            world.add_body(name, hulls, make_pose(translation=(x, y, z + 0.0005)),
+                           rigid_props(m, hulls, SIM.density, 1.0))
+            assert settle_object(world, name, SettleParams()).settled  # each rests on the frozen ones below
+            if name != "L":
+                world.set_static(name)
+        near = sorted(world.distances("L", ["shelf", "P", "B"], 0.004))
+        assert near == ["B"]
+        carriers = load_carriers(world, "L", near, set(), 0.004, depth)
+        assert carriers == ["B", "P"][:depth]
+        moved = gives_way(world, "L", carriers, 60, 0.005, 1.0)
+        assert bool(moved) is gives and (not gives or "P" in moved)
+
+
 @pytest.mark.parametrize("optimizer", ["adam", "steepest"])
 def test_penetration_solve_pushes_along_the_normal_with_steepest(tmp_path, optimizer):
     """A cube sunk 2 cm into a tilted wall: the smallest translation clearing it is (2 cm + eps) along the normal."""

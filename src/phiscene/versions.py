@@ -8,7 +8,7 @@ bumping one here after a behaviour change reruns exactly the affected jobs
 BENCHMARK = 2
 PROXIES = 2
 TOPOLOGY = 3
-GROUND = 5
+GROUND = 6
 METRICS = 4
 TABLES = 2
 REPORT = 1

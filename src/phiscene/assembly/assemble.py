@@ -24,7 +24,14 @@ import numpy as np
 from phiscene.assembly import faithful as fa
 from phiscene.assembly.faithful import FaithfulParams
 from phiscene.assembly.penetration import PenetrationParams, SdfBody, resolve_penetration, sdf_body
-from phiscene.assembly.settle import SettleParams, gives_way, holds_when_tilted, settle_object, window_motion
+from phiscene.assembly.settle import (
+    SettleParams,
+    gives_way,
+    holds_when_tilted,
+    load_carriers,
+    settle_object,
+    window_motion,
+)
 from phiscene.errors import InputError
 from phiscene.params import Params
 from phiscene.proxies import Proxy, check_proxies
@@ -508,7 +515,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
             robust = holds_when_tilted(world, oid, fp.tilt_test, fp.tilt_frames, fp.joint_tol, fp.joint_tol_deg)
             frames += 4 * fp.tilt_frames
         gave: list[str] = []  # the placed objects it touches, released under it, hold it
-        carriers = [q for q in near if q not in info["fixed"] and world.bodies[q].props is not None]
+        carriers = load_carriers(world, oid, near, info["fixed"], fp.contact_tol, fp.load_depth)
         if result.settled and in_place and robust and fp.load_frames > 0 and carriers:
             gave = gives_way(world, oid, carriers, fp.load_frames, fp.joint_tol, fp.joint_tol_deg)
             frames += fp.load_frames

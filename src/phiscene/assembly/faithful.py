@@ -144,6 +144,10 @@ class FaithfulParams(Params):
         under it for this many frames, hold it (:func:`~phiscene.assembly.settle.gives_way`: nothing moves more
         than ``joint_tol`` / ``joint_tol_deg``); 0 = off. Sequential settling tests an object against a frozen
         context, and the release of the whole scene is where a supporter that cannot carry its load collapses.
+    load_depth
+        How many levels of carriers the load test releases: 1 = the placed objects the object touches; each
+        further level adds the bodies touching a released carrier with their centre of mass below its (its
+        supporters: a plank whose book holds the new box but tips under book and box together).
     contact_tol
         A supporter counts as kept when the object is within this distance of it at rest (m).
     retry_damping
@@ -182,6 +186,7 @@ class FaithfulParams(Params):
     tilt_test: float = 4.0
     tilt_frames: int = 60
     load_frames: int = 60
+    load_depth: int = 4
     contact_tol: float = 0.004
     retry_damping: float = 0.9
     retry_rolling_friction: float = 0.1
@@ -197,6 +202,8 @@ class FaithfulParams(Params):
                     "shift_directions", "onto_reach", "planar_floor", "load_frames"):
             if getattr(self, key) < 0:
                 raise ValueError(f"faithful parameter {key!r} must be >= 0, got {getattr(self, key)}")
+        if self.load_depth < 1:
+            raise ValueError(f"faithful parameter 'load_depth' must be >= 1, got {self.load_depth}")
         if not 0.0 <= self.retry_damping < 1.0:
             raise ValueError(f"faithful retry_damping must be in [0, 1), got {self.retry_damping}")
 

@@ -257,6 +257,48 @@ def holds_when_tilted(world: BulletWorld, name: str, tilt_deg: float, frames: in
     return held
 
 
+def load_carriers(world: BulletWorld, name: str, near: list[str], fixed, tol: float, depth: int) -> list[str]:
+    """The placed bodies the load test (:func:`gives_way`) releases under ``name``.
+
+    Level 1 is what ``name`` touches (``near``); each further level adds the bodies within ``tol`` of a carrier
+    of the level above whose centre of mass lies lower than that carrier's (its supporters): a plank holds the
+    book on it and the book holds the new box, but the plank tips under book and box together.
+
+    Parameters
+    ----------
+    world
+        The world, ``name`` and the placed bodies in it.
+    name
+        The body just settled.
+    near
+        The bodies ``name`` touches.
+    fixed
+        Ids never released (attached objects); bodies without mass properties (static context) neither.
+    tol
+        Contact distance (m).
+    depth
+        Levels (>= 1).
+
+    Returns
+    -------
+    The carriers, level by level, each level sorted.
+    """
+    free = [q for q in world.bodies if q != name and q not in fixed and world.bodies[q].props is not None]
+    chain = sorted(q for q in near if q in free)
+    level = list(chain)
+    for _ in range(depth - 1):
+        rest = [q for q in free if q not in chain]
+        if not level or not rest:
+            break
+        below: set[str] = set()
+        for c in level:
+            zc = world.com_position(c)[2]
+            below |= {q for q in world.distances(c, rest, tol) if world.com_position(q)[2] < zc}
+        level = sorted(below)
+        chain += level
+    return chain
+
+
 def gives_way(world: BulletWorld, name: str, carriers: list[str], frames: int, tol_pos: float,
               tol_rot_deg: float) -> list[str]:
     """Which of ``name`` and its ``carriers`` move when the carriers, frozen so far, are released under it.
