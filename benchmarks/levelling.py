@@ -37,7 +37,7 @@ def icp_reference_up(root: str, scene: str) -> tuple[np.ndarray, float]:
     import trimesh
     from scipy.spatial import cKDTree
 
-    from phiscene.io.rest3d import read_rest3d, reference_levelling
+    from phiscene.io.rest3d import reference_levelling
     from phiscene.metrics.reconstruction import icp
 
     K = reference_levelling(root, scene)
@@ -50,10 +50,10 @@ def icp_reference_up(root: str, scene: str) -> tuple[np.ndarray, float]:
         init = np.eye(4)
         init[:3, :3] = K
         init[:3, 3] = pb.mean(axis=0) - K @ pa.mean(axis=0)
-        T = icp(pa, pb, init, 100, ICP_REACH * float(np.linalg.norm(a[oid].extents)))
-        moved = pa @ T[:3, :3].T + T[:3, 3]
-        gap, _ = cKDTree(pb).query(moved)
-        fitness = float(np.mean(gap < ICP_REACH * float(np.linalg.norm(a[oid].extents))))  # share registered
+        reach = ICP_REACH * float(np.linalg.norm(a[oid].extents))
+        T = icp(pa, pb, init, 100, reach)
+        gap, _ = cKDTree(pb).query(pa @ T[:3, :3].T + T[:3, 3])
+        fitness = float(np.mean(gap < reach))  # share registered
         ups.append(T[:3, :3].T @ np.array([0.0, 1.0, 0.0]))
         weights.append(max(fitness, 1e-3))
     ups, weights = np.array(ups), np.array(weights)

@@ -514,11 +514,12 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         if result.settled and in_place and fp.tilt_test > 0 and not info["leaning"]:  # leaning: friction
             robust = holds_when_tilted(world, oid, fp.tilt_test, fp.tilt_frames, fp.joint_tol, fp.joint_tol_deg)
             frames += 4 * fp.tilt_frames
-        gave: list[str] = []  # the placed objects it touches, released under it, hold it
-        carriers = load_carriers(world, oid, near, info["fixed"], fp.contact_tol, fp.load_depth)
-        if result.settled and in_place and robust and fp.load_frames > 0 and carriers:
-            gave = gives_way(world, oid, carriers, fp.load_frames, fp.joint_tol, fp.joint_tol_deg)
-            frames += fp.load_frames
+        gave: list[str] = []  # the placed objects it touches (and their supporters), released under it, hold it
+        if result.settled and in_place and robust and fp.load_frames > 0:
+            carriers = load_carriers(world, oid, near, info["fixed"], fp.contact_tol, fp.load_depth)
+            if carriers:
+                gave = gives_way(world, oid, carriers, fp.load_frames, fp.joint_tol, fp.joint_tol_deg)
+                frames += fp.load_frames
         whys = ["" if ok else f"moved {moved:.3f} m / {turned:.1f} deg",
                 f"lost supporters {lost}" if lost else "", "" if result.settled else "not settled",
                 "" if robust else f"marginal: tips when tilted {fp.tilt_test:g} deg",

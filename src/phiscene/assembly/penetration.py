@@ -261,7 +261,6 @@ class _Loss:
         self.pivot = torch.as_tensor(active.samples().mean(axis=0))
         self.ground_points = torch.as_tensor(ground_pts)
         self.hull_world = active.hull()
-        self.planar = planar
         #: the rotation solve turns about the vertical only (a floor-standing or supported object stays flush)
         self.yaw_only = planar or yaw_only
         self.aabb_active = active.aabb()
@@ -271,10 +270,22 @@ class _Loss:
         self.reach = [eps + k.cell_diagonal() + active.cell_diagonal() for k in context]
         self.used: set[str] = set()
 
-    def near(self, x: np.ndarray) -> list[int]:
-        """Indices of the context bodies that can contribute at translation ``x`` (3,)."""
-        box = self.aabb_active + x
+    def near(self, box: np.ndarray) -> list[int]:
+        """Indices of the context bodies that can contribute with the active body inside ``box`` (2, 3)."""
         return [i for i, (b, r) in enumerate(zip(self.aabbs, self.reach)) if aabb_gap(box, b) <= r]
+
+    def _context_terms(self, total, idx: list[int], moved, to_active):
+        """``total`` plus the hinge terms against the context bodies ``idx``: the active samples at ``moved``
+        (n, 3) in each context grid, and the context samples, taken into the active's unmoved frame by
+        ``to_active``, in the active grid."""
+        import torch
+
+        self.used.update(self.context[i].id for i in idx)
+        for i in idx:
+            k = self.context[i]
+            total = total + torch.relu(self.eps - k.grid.query(moved, k.pose)).sum()
+        Q = to_active(torch.cat([self.Q[i] for i in idx]))
+        return total + torch.relu(self.eps - self.active.grid.query(Q, self.active.pose)).sum()
 
     def __call__(self, x, w=None):
         """The loss at translation ``x`` (3,) and, when given, rotation vector ``w`` (3,) about :attr:`pivot`."""
@@ -288,26 +299,17 @@ class _Loss:
         R = torch.linalg.matrix_exp(_skew(w))
         c = self.pivot
         total = x.new_zeros(())
-        gp = (self.ground_points - c) @ R.T + c + x
+        turned = (self.ground_points - c) @ R.T + c
         if self.ground_height is not None:
-            total = total + torch.relu(eps - (gp[:, 2] - self.ground_height)).sum()
+            total = total + torch.relu(eps - (turned[:, 2] + x[2] - self.ground_height)).sum()
         x = x * self.mask + (x * (1.0 - self.mask)).detach()  # planar: only the ground pushes vertically
-        gp = (self.ground_points - c) @ R.T + c + x
         for _, normal, offset in self.planes:
-            total = total + torch.relu(eps - (gp @ normal + offset)).sum()
+            total = total + torch.relu(eps - ((turned + x) @ normal + offset)).sum()
         Rn = R.detach().numpy()
         hull = (self.hull_world - c.numpy()) @ Rn.T + c.numpy() + x.detach().numpy()
-        box = np.stack([hull.min(axis=0), hull.max(axis=0)])
-        idx = [i for i, (b, r) in enumerate(zip(self.aabbs, self.reach)) if aabb_gap(box, b) <= r]
-        if idx:
-            self.used.update(self.context[i].id for i in idx)
-            moved = (self.P - c) @ R.T + c + x
-            for i in idx:
-                k = self.context[i]
-                total = total + torch.relu(eps - k.grid.query(moved, k.pose)).sum()
-            Q = torch.cat([self.Q[i] for i in idx])
-            back = (Q - c - x) @ R + c  # the inverse motion, into the active's unmoved frame
-            total = total + torch.relu(eps - self.active.grid.query(back, self.active.pose)).sum()
+        idx = self.near(np.stack([hull.min(axis=0), hull.max(axis=0)]))
+        if idx:  # the context samples go back by the inverse motion, into the active's unmoved frame
+            total = self._context_terms(total, idx, (self.P - c) @ R.T + c + x, lambda Q: (Q - c - x) @ R + c)
         return total
 
     def _translated(self, x):
@@ -320,15 +322,9 @@ class _Loss:
         x = x * self.mask + (x * (1.0 - self.mask)).detach()  # planar: only the ground pushes vertically
         for dist, normal, _ in self.planes:
             total = total + torch.relu(eps - (dist + x @ normal)).sum()
-        idx = self.near(x.detach().numpy())
+        idx = self.near(self.aabb_active + x.detach().numpy())
         if idx:
-            self.used.update(self.context[i].id for i in idx)
-            moved = self.P + x
-            for i in idx:
-                k = self.context[i]
-                total = total + torch.relu(eps - k.grid.query(moved, k.pose)).sum()
-            Q = torch.cat([self.Q[i] for i in idx]) - x
-            total = total + torch.relu(eps - self.active.grid.query(Q, self.active.pose)).sum()
+            total = self._context_terms(total, idx, self.P + x, lambda Q: Q - x)
         return total
 
 
