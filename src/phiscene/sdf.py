@@ -167,7 +167,9 @@ class SignedDistance:
     ----------
     mesh
         Any triangle mesh; closed, outward-oriented shells give meaningful signs
-        (overlapping and touching shells are fine).
+        (overlapping and touching shells are fine). Distances and signs are those of its outer shell
+        (:func:`phiscene.solid.outer_shell`): a hollow, double-walled reconstruction is the solid it stands for,
+        its cavity inside, and the depth below its outer surface.
     params
         Winding-number parameters.
     """
@@ -175,6 +177,9 @@ class SignedDistance:
     def __init__(self, mesh: trimesh.Trimesh, params: WindingParams = WindingParams()):
         import igl
 
+        from phiscene.solid import outer_shell
+
+        mesh = outer_shell(mesh)
         vertices = np.asarray(mesh.vertices, dtype=float)
         faces = np.asarray(mesh.faces, dtype=np.int64)
         if len(faces) == 0:

@@ -1,0 +1,125 @@
+"""Hollow, double-walled reconstructions (phiscene.solid) against the solid they stand for.
+
+The oracle of every test is a mesh whose solid is known: a double-walled sphere stands for the ball of its outer
+sphere, so its signed distance must equal the outer sphere's alone (an independent, single-shell computation), its
+proxies must cover that ball, and a ball put inside its cavity is inside it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from phiscene.proxies import ProxyParams, decompose_route, fidelity
+from phiscene.sdf import SignedDistance, winding_number_exact
+from phiscene.solid import ShellParams, inner_faces, outer_shell, solid_surface
+
+
+def double_wall(radius: float = 0.1, wall: float = 0.004, hole: float = 0.0, subdivisions: int = 4):
+    """A sphere shell as a 3D foundation model writes it: outer sphere outward, inner sphere facing the cavity.
+
+    ``hole`` > 0 removes a cap of that angular radius (rad) around +z from both walls (the walls' opening).
+    Returns the mesh and the outer sphere (with the same hole), the oracle.
+    """
+    outer = trimesh.creation.icosphere(subdivisions, radius)
+    inner = trimesh.creation.icosphere(subdivisions, radius - wall)
+    inner.invert()
+    if hole > 0:
+        for m in (outer, inner):
+            m.update_faces(m.triangles_center[:, 2] < np.cos(hole) * np.linalg.norm(m.triangles_center, axis=1))
+            m.remove_unreferenced_vertices()
+    return trimesh.util.concatenate([outer, inner]), outer
+
+
+def test_double_wall_sphere_is_the_ball_of_its_outer_wall():
+    mesh, outer = double_wall()
+    centre = np.zeros((1, 3))
+    assert abs(winding_number_exact(mesh.triangles, centre)[0]) < 1e-9  # the cavity is "outside" the raw mesh
+    shell = outer_shell(mesh)
+    assert len(shell.faces) == len(outer.faces)
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-0.12, 0.12, size=(2000, 3))
+    got = SignedDistance(mesh)(pts)
+    want = SignedDistance(outer)(pts)  # the oracle: the outer sphere alone
+    np.testing.assert_allclose(got, want, atol=1e-12)
+    assert got[np.linalg.norm(pts, axis=1) < 0.09].max() < 0  # the whole cavity is inside
+
+
+def test_walls_meeting_around_a_small_opening_are_still_a_solid():
+    # a 2.4 cm opening on a 20 cm sphere: less than seal x the longest axis, so the cavity is sealed
+    mesh, outer = double_wall(hole=0.12)
+    inner = inner_faces(mesh)
+    assert inner.sum() == len(mesh.faces) - len(outer.faces)
+    assert SignedDistance(mesh)(np.zeros((1, 3)))[0] < -0.09
+
+
+@pytest.mark.parametrize("hole", [np.pi / 2, 1.2])
+def test_a_bowl_or_cup_open_to_the_outside_keeps_its_cavity_outside(hole):
+    mesh, _ = double_wall(hole=hole)
+    assert not inner_faces(mesh).any()
+    assert outer_shell(mesh) is mesh
+
+
+def test_solids_overlaps_and_inward_meshes_are_unchanged():
+    T = trimesh.transformations.translation_matrix
+    box = trimesh.creation.box([1.0, 0.5, 0.2])
+    overlap = trimesh.util.concatenate([trimesh.creation.box([1, 1, 1]), trimesh.creation.box([1, 1, 1],
+                                                                                               transform=T([0.5, 0, 0]))])
+    inward = trimesh.creation.icosphere(3, 1.0)
+    inward.invert()
+    for m in (box, overlap, inward):
+        assert outer_shell(m) is m
+
+
+def test_shell_params_rejects_bad_values():
+    with pytest.raises(ValueError):
+        ShellParams.from_dict({"resolution": 4})
+    with pytest.raises(ValueError):
+        ShellParams.from_dict({"seal": 0.6})
+
+
+def test_solid_surface_of_a_double_wall_is_closed_and_on_the_outer_sphere():
+    mesh, _ = double_wall()
+    surface = solid_surface(mesh, 32)
+    assert surface.is_watertight
+    r = np.linalg.norm(surface.vertices, axis=1)
+    cell = 0.2 / 32
+    assert np.all(np.abs(r - 0.1) < cell)  # no inner wall: every vertex within a cell of the outer sphere
+
+
+def test_a_double_wall_is_decomposed_as_its_solid_and_covered():
+    fruit, outer = double_wall(radius=0.05, wall=0.002, subdivisions=5)
+    fruit.apply_scale([1.0, 1.0, 1.6])  # an ellipsoid flattened below: a pear-like solid
+    fruit.vertices[fruit.vertices[:, 2] < -0.06, 2] *= 0.5
+    hulls, route = decompose_route(fruit, ProxyParams(convex_tolerance=0.0, max_hulls=8, mcts_iterations=10,
+                                                      mcts_nodes=8, resolution=300))
+    assert route == "solid"
+    _, outside, _ = fidelity(fruit, hulls)
+    diag = float(np.linalg.norm(fruit.extents))
+    assert outside <= ProxyParams().solid_tolerance * diag
+    # the hulls fill the solid (inside the outer wall alone, the oracle), not the 2 mm wall (6 % of it): on a
+    # regular grid, the points inside the union of the hulls against those inside the outer wall
+    solid = outer.copy()
+    solid.vertices = fruit.vertices[: len(outer.vertices)]
+    axes = [np.linspace(lo, hi, 40) for lo, hi in zip(*fruit.bounds)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    want = SignedDistance(solid)(grid) < 0
+    got = np.zeros(len(grid), dtype=bool)
+    for h in hulls:
+        hull = trimesh.convex.convex_hull(h)
+        got |= (grid @ hull.face_normals.T - np.einsum("ij,ij->i", hull.face_normals, hull.triangles[:, 0])).max(1) < 0
+    assert (got & want).sum() >= 0.97 * want.sum()
+    assert got.sum() <= 1.1 * want.sum()
+
+
+def test_penetration_into_the_cavity_of_a_hollow_object_is_measured():
+    from phiscene.metrics.physical import worst_pair_distance
+    from phiscene.meshes import sample_surface
+    from phiscene.sdf import signed_distance_for
+
+    hollow, _ = double_wall()
+    ball = trimesh.creation.icosphere(3, 0.02)  # a 2 cm ball at the centre of the 10 cm shell: 8 cm deep
+    w = worst_pair_distance(sample_surface(ball, 512, 0), signed_distance_for(ball),
+                            sample_surface(hollow, 512, 0), signed_distance_for(hollow))
+    assert w == pytest.approx(-0.08, abs=0.004)
