@@ -64,8 +64,8 @@ def test_a_bowl_or_cup_open_to_the_outside_keeps_its_cavity_outside(hole):
 def test_solids_overlaps_and_inward_meshes_are_unchanged():
     T = trimesh.transformations.translation_matrix
     box = trimesh.creation.box([1.0, 0.5, 0.2])
-    overlap = trimesh.util.concatenate([trimesh.creation.box([1, 1, 1]), trimesh.creation.box([1, 1, 1],
-                                                                                               transform=T([0.5, 0, 0]))])
+    overlap = trimesh.util.concatenate([trimesh.creation.box([1, 1, 1]),
+                                        trimesh.creation.box([1, 1, 1], transform=T([0.5, 0, 0]))])
     inward = trimesh.creation.icosphere(3, 1.0)
     inward.invert()
     for m in (box, overlap, inward):
@@ -114,8 +114,8 @@ def test_a_double_wall_is_decomposed_as_its_solid_and_covered():
 
 
 def test_penetration_into_the_cavity_of_a_hollow_object_is_measured():
-    from phiscene.metrics.physical import worst_pair_distance
     from phiscene.meshes import sample_surface
+    from phiscene.metrics.physical import worst_pair_distance
     from phiscene.sdf import signed_distance_for
 
     hollow, _ = double_wall()

@@ -302,7 +302,6 @@ def fidelity(mesh: trimesh.Trimesh, hulls: list[np.ndarray], samples: int = 2048
     inside another hull are cut faces between pieces, not proxy surface) against the mesh's solid (a sample
     inside it reaches nowhere beyond it).
     """
-    from phiscene.meshes import sample_surface
     from phiscene.sdf import signed_distance_for
 
     hull_meshes = [trimesh.convex.convex_hull(h) for h in hulls]

@@ -9,15 +9,16 @@ sees the wall only, and an object pushed deep into a pear is not inside it.
 
 :func:`outer_shell` drops the faces that face a sealed cavity. The mesh's surface is rasterised onto a voxel grid
 (``resolution`` voxels along the longest axis, every face sampled on a barycentric lattice finer than half a
-voxel, so the grid is the same for the same mesh), the surface voxels are closed morphologically (openings narrower than ``seal`` of the longest
-axis are sealed: the walls of a reconstructed pear meet around a hole of 1-3 cm), the exterior is flood-filled
-from the grid's border, and a connected region of voxels neither reached nor on the surface is *enclosed* when it
-reaches deeper than the closing radius from the surface (a sealed cavity, not a crevice the closing bridged). A face is inner when the point ``probe`` voxels in front of it lies in
-an enclosed region whose winding number is below ``TOL.winding_inside`` (the cavity of a double wall, not the body
-of a solid, where the number is 1, nor the overlap of two solids, where it is 2; read exactly at the region's
-deepest voxels). What remains is the outer
-surface: its winding number is about 1 in the whole body (the lip where an inner wall met the outer one is a
-small hole the winding number tolerates), and the distance to it is the depth below the object's real surface.
+voxel, so the grid is the same for the same mesh), the surface voxels are closed morphologically (openings
+narrower than ``seal`` of the longest axis are sealed: the walls of a reconstructed pear meet around a hole of
+1-3 cm), the exterior is flood-filled from the grid's border, and a connected region of voxels neither reached
+nor on the surface is *enclosed* when it reaches deeper than the closing radius from the surface (a sealed
+cavity, not a crevice the closing bridged). A face is inner when the point ``probe`` voxels in front of it lies
+in an enclosed region whose winding number is below ``TOL.winding_inside`` (the cavity of a double wall, not the
+body of a solid, where the number is 1, nor the overlap of two solids, where it is 2; read exactly at the
+region's deepest voxels). What remains is the outer surface: its winding number is about 1 in the whole body
+(the lip where an inner wall met the outer one is a small hole the winding number tolerates), and the distance
+to it is the depth below the object's real surface.
 
 A mesh with no enclosed voxel (every solid or open model: boxes, bowls, chairs, containers whose cavity is open
 to the outside) is returned unchanged, as is one whose outer faces would be fewer than ``min_outer`` of all
