@@ -49,7 +49,7 @@ def main(root: str = "data/REST3D") -> int:
         wn_before = wn_after = ratio = float("nan")
         if inner.any():
             vox = voxel_shell(mesh, params)
-            deepest = np.concatenate(vox.deepest)[:1]
+            deepest = vox.deepest[np.argmax(np.bincount(vox.deepest_region))][None]
             wn_before = float(winding_number_exact(mesh.triangles, deepest)[0])
             wn_after = float(winding_number_exact(mesh.triangles[~inner], deepest)[0])
             solid = solid_surface(mesh, SOLID_RESOLUTION)

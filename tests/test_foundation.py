@@ -157,3 +157,31 @@ def test_workflow_gives_the_gt_row_its_own_proxies_only_on_reconstructed_suites(
 
     assert "results/proxies/contact/scene_000.gt.npz" in dry("foundation")
     assert ".gt.npz" not in dry("clean")
+
+
+def test_hollow_reconstructions_are_double_walls_that_the_solid_test_fills(boxes, tmp_path):
+    from phiscene.bench.foundation import inner_wall
+    from phiscene.sdf import SignedDistance, winding_number_exact
+
+    params = FoundationParams(faces=2000, hollow_share=1.0, hole_fraction=0.0)
+    made = foundation_scene(boxes["gt"], boxes["camera"], boxes["labels"], params, 7, tmp_path / "meshes")
+    hollow = 0
+    for o, g in zip(made.initial.objects, boxes["gt"].objects):
+        mesh = o.mesh()
+        wall = params.wall * float(np.linalg.norm(o.world_mesh().extents))
+        thinnest = float(min(g.world_mesh().extents))
+        centre = mesh.bounding_box.centroid[None]
+        if o.meta["degrade"]["inner_faces"] == 0:
+            assert thinnest < 2.5 * wall  # only a part thinner than two walls (plus the shape errors) stays solid
+            continue
+        hollow += 1
+        # the raw mesh holds a cavity with winding number 0 (the oracle: the brute-force solid-angle sum) ...
+        assert abs(winding_number_exact(mesh.triangles, centre)[0]) < 0.05
+        # ... that the solid-aware signed distance counts as inside, about half the thinnest extent deep
+        assert SignedDistance(mesh)(centre)[0] < -0.3 * thinnest
+    assert hollow >= 2
+    # the inner wall lies `wall` inside a box (closed form: the box shrunk by the wall on every side)
+    box = trimesh.creation.box([0.3, 0.2, 0.1])
+    inner = inner_wall(box, 0.01)
+    np.testing.assert_allclose(inner.extents, [0.28, 0.18, 0.08], atol=0.01 / 2.0)
+    assert inner.volume < 0  # it faces the cavity

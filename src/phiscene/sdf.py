@@ -20,6 +20,10 @@ number lies within ``exact_band`` of the inside threshold is recomputed exactly 
 ``exact_band`` (it is two orders of magnitude smaller; see the tests, whose oracle is
 :func:`winding_number_exact`, the brute-force sum of Van Oosterom-Strackee solid angles). libigl's C++ replaced a
 NumPy hierarchy of ours: 6-7x faster on the grids of 30,000-face scans.
+
+Distances and signs are those of the mesh's outer shell (:func:`phiscene.solid.outer_shell`): a hollow,
+double-walled reconstruction (a third of SAM 3D Objects' meshes) has winding number 0 in its cavity, which is
+inside the object it stands for.
 """
 
 from __future__ import annotations

@@ -49,7 +49,7 @@ from phiscene.transforms import decompose
 log = logging.getLogger(__name__)
 
 #: Bump when grid construction changes in a way that changes values.
-SDF_GRID_VERSION = 1
+SDF_GRID_VERSION = 2
 
 #: In-memory grids by (mesh hash, params hash), least recently used evicted beyond ``_MEMORY_SIZE``.
 _MEMORY: "OrderedDict[tuple[str, str], SdfGrid]" = OrderedDict()

@@ -12,13 +12,13 @@ sees the wall only, and an object pushed deep into a pear is not inside it.
 voxel, so the grid is the same for the same mesh), the surface voxels are closed morphologically (openings
 narrower than ``seal`` of the longest axis are sealed: the walls of a reconstructed pear meet around a hole of
 1-3 cm), the exterior is flood-filled from the grid's border, and a connected region of voxels neither reached
-nor on the surface is *enclosed* when it reaches deeper than the closing radius from the surface (a sealed
-cavity, not a crevice the closing bridged). A face is inner when the point ``probe`` voxels in front of it lies
-in an enclosed region whose winding number is below ``TOL.winding_inside`` (the cavity of a double wall, not the
-body of a solid, where the number is 1, nor the overlap of two solids, where it is 2; read exactly at the
-region's deepest voxels). What remains is the outer surface: its winding number is about 1 in the whole body
-(the lip where an inner wall met the outer one is a small hole the winding number tolerates), and the distance
-to it is the depth below the object's real surface.
+nor on the surface is *enclosed* when the surface alone encloses it, or when it reaches deeper than the closing
+radius from the surface (a cavity behind a small opening, not a crevice the closing bridged). A face is inner
+when the point ``probe`` voxels in front of it lies in an enclosed region whose winding number is below
+``TOL.winding_inside`` (the cavity of a double wall, not the body of a solid, where the number is 1, nor the
+overlap of two solids, where it is 2; read exactly at the region's deepest voxels). What remains is the outer
+surface: its winding number is about 1 in the whole body (the lip where an inner wall met the outer one is a
+small hole the winding number tolerates), and the distance to it is the depth below the object's real surface.
 
 A mesh with no enclosed voxel (every solid or open model: boxes, bowls, chairs, containers whose cavity is open
 to the outside) is returned unchanged, as is one whose outer faces would be fewer than ``min_outer`` of all
@@ -96,8 +96,10 @@ class VoxelShell:
         Voxels the surface passes through; voxels neither on the surface nor reachable from outside.
     regions : (nx, ny, nz) int
         Label of the enclosed region each enclosed voxel belongs to (1, 2, ...; 0 elsewhere).
-    deepest : list of (k, 3) float
-        Per region (label order), the centres of its voxels farthest from the surface (at most 8).
+    deepest : (k, 3) float
+        Centres of each region's voxels farthest from the surface (at most 8 per region).
+    deepest_region : (k,) int
+        The region label of each of them.
     """
 
     origin: np.ndarray
@@ -105,7 +107,8 @@ class VoxelShell:
     surface: np.ndarray
     enclosed: np.ndarray
     regions: np.ndarray
-    deepest: list
+    deepest: np.ndarray
+    deepest_region: np.ndarray
 
     def index(self, points: np.ndarray) -> np.ndarray:
         """Voxel indices (n, 3) int of points (n, 3), clipped to the grid."""
@@ -167,19 +170,32 @@ def voxel_shell(mesh: trimesh.Trimesh, params: ShellParams = ShellParams()) -> V
         filled = ndimage.binary_erosion(filled, cross, iterations=params.close, border_value=0) | surface
     enclosed = filled & ~surface
     regions = np.zeros(shape, dtype=np.int32)
-    deepest = []
-    if enclosed.any():  # keep the regions deeper than the closing radius: cavities, not bridged crevices
+    deepest, deepest_region = np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+    if enclosed.any():
+        # a region enclosed by the surface itself is a cavity; one the closing enclosed must reach deeper than
+        # the closing radius (a cavity behind a small opening, not a crevice the closing bridged)
+        closed_by_surface = ndimage.binary_fill_holes(surface) & ~surface
         labels, n = ndimage.label(enclosed)
         dist = ndimage.distance_transform_edt(~surface)
-        depth = np.asarray(ndimage.maximum(dist, labels, index=np.arange(1, n + 1)))
-        for label in 1 + np.flatnonzero(depth > params.close + 0.5):
-            cells = np.argwhere(labels == label)
-            d = dist[labels == label]
-            regions[labels == label] = len(deepest) + 1
-            deepest.append(origin + (cells[np.argsort(-d, kind="stable")[:8]] + 0.5) * pitch)
+        index = np.arange(1, n + 1)
+        depth = np.asarray(ndimage.maximum(dist, labels, index=index))
+        own = np.asarray(ndimage.maximum(closed_by_surface, labels, index=index)) > 0
+        keep = np.zeros(n + 1, dtype=bool)
+        keep[index[own | (depth > params.close + 0.5)]] = True
+        renumber = np.cumsum(keep) * keep  # kept labels -> 1, 2, ...
+        regions = renumber[labels].astype(np.int32)
+        cells = np.flatnonzero(regions)
+        if len(cells):  # the (at most 8) deepest voxels of each kept region
+            order = np.lexsort((-dist.ravel()[cells], regions.ravel()[cells]))
+            cells = cells[order]
+            region_of = regions.ravel()[cells]
+            first = np.searchsorted(region_of, np.arange(1, region_of.max() + 1))
+            top = np.arange(len(cells)) - first[region_of - 1] < 8
+            deepest = origin + (np.stack(np.unravel_index(cells[top], shape), axis=1) + 0.5) * pitch
+            deepest_region = region_of[top].astype(np.int64)
         enclosed = regions > 0
     return VoxelShell(origin=origin, pitch=pitch, surface=surface, enclosed=enclosed, regions=regions,
-                      deepest=deepest)
+                      deepest=deepest, deepest_region=deepest_region)
 
 
 def inner_faces(mesh: trimesh.Trimesh, params: ShellParams = ShellParams()) -> np.ndarray:
@@ -188,7 +204,7 @@ def inner_faces(mesh: trimesh.Trimesh, params: ShellParams = ShellParams()) -> n
     All ``False`` when the mesh encloses no cavity, or when fewer than ``min_outer`` of its faces would
     remain.
     """
-    from phiscene.sdf import winding_number_exact
+    import igl
 
     n_faces = len(mesh.faces)
     vox = voxel_shell(mesh, params)
@@ -196,9 +212,12 @@ def inner_faces(mesh: trimesh.Trimesh, params: ShellParams = ShellParams()) -> n
     if not vox.enclosed.any():
         return inner
     # a cavity of a double wall has winding number ~0; the body of a solid 1, the overlap of two solids 2
-    triangles = np.asarray(mesh.triangles, dtype=float)
-    hollow = np.array([False] + [np.median(winding_number_exact(triangles, pts)) < TOL.winding_inside
-                                 for pts in vox.deepest])
+    tri = np.ascontiguousarray(np.asarray(mesh.triangles, dtype=float).reshape(-1, 3))
+    w = igl.winding_number(tri, np.arange(len(tri), dtype=np.int64).reshape(-1, 3), np.ascontiguousarray(vox.deepest))
+    n_regions = int(vox.regions.max())
+    hollow = np.zeros(n_regions + 1, dtype=bool)
+    for r in np.unique(vox.deepest_region):
+        hollow[r] = np.median(w[vox.deepest_region == r]) < TOL.winding_inside
     if not hollow.any():
         return inner
     centres = np.asarray(mesh.triangles_center, dtype=float)

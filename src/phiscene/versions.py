@@ -5,10 +5,10 @@ bumping one here after a behaviour change reruns exactly the affected jobs
 (Snakemake reruns a job whose params changed).
 """
 
-BENCHMARK = 2
-PROXIES = 2
-TOPOLOGY = 3
-GROUND = 6
-METRICS = 4
+BENCHMARK = 3
+PROXIES = 3
+TOPOLOGY = 4
+GROUND = 7
+METRICS = 5
 TABLES = 2
 REPORT = 1

@@ -8,8 +8,10 @@ reference camera and its instance segmentation, every draw from the scene seed:
    tens of thousands of faces (``faces``); the side the reference camera sees is kept, the hidden side is
    flattened along the view ray towards the farthest visible point (``hidden_flatten``) and bumped with low-frequency
    noise (``hidden_noise``); some hidden faces are dropped, so the mesh is not watertight
-   (``hole_fraction``); and its lengths are off per object axis (``axis_scale``: a book too thick, a spoon too
-   short).
+   (``hole_fraction``); its lengths are off per object axis (``axis_scale``: a book too thick, a spoon too
+   short); and a share of the objects (``hollow_share``) come out as hollow, double-walled shells, the outer
+   surface and an inner one ``wall`` inside it facing a sealed cavity (:func:`inner_wall`), as the sparse-voxel
+   surfaces of SAM 3D Objects do (:mod:`phiscene.solid`; parts thinner than two walls stay solid).
 2. **Poses err mostly along the camera ray.** The depth error is log-normal in magnitude with a random sign
    (``depth_median`` metres, ``depth_log_sigma``, capped at ``depth_max``), plus a small
    lateral error (``lateral_sigma``); rotation errors are log-normal in angle about a random axis
@@ -28,8 +30,10 @@ SAM 3D vs ground-truth pose pairs; ``benchmarks/foundation_stats.py`` measures t
 translation error median 5.2 cm, 90th percentile 15.6 cm, max 43 cm, mostly along the ray (1.4-5 % of the
 depth): ``depth_*``, ``lateral_sigma``; rotation error median 3.6 deg, p90 11 deg, max 29 deg: ``rotation_*``;
 per-object scale 0.88-1.06: ``scale``; gravity off by 2.5-22 deg, median 14.7: ``tilt_*``; meshes of about
-30,000 faces, never watertight, hidden sides guessed or flattened, lengths and thicknesses off: ``faces``,
-``hidden_*``, ``hole_fraction``, ``axis_scale``.
+30,000 faces, hidden sides guessed or flattened, lengths and thicknesses off: ``faces``, ``hidden_*``,
+``hole_fraction``, ``axis_scale``; 31 of the 117 meshes hollow shells whose walls hold a median 16 % of the solid's
+volume (``benchmarks/hollow_shells.py``; a wall of 1.6 % of a ball's bounding-box diagonal holds 16 % of it):
+``hollow_share``, ``wall``.
 
 What is not modelled: the camera frame's heading and origin (a levelling cannot recover them, and comparing with
 ground truth would need an alignment first), thin parts misplaced, merged or split objects.
@@ -72,6 +76,10 @@ class FoundationParams(Params):
         Share of the hidden faces dropped (the mesh is open; at least one face always is).
     axis_scale
         Range of the per-axis size factor of a reconstruction (object frame).
+    hollow_share
+        Share of the reconstructions written as hollow, double-walled shells (:func:`inner_wall`).
+    wall
+        Their wall thickness, as a share of the object's bounding-box diagonal.
     scale
         Range of the uniform scale factor of the pose.
     depth_median
@@ -102,6 +110,8 @@ class FoundationParams(Params):
     hidden_noise: float = 0.005
     hole_fraction: float = 0.01
     axis_scale: tuple[float, float] = (0.9, 1.08)
+    hollow_share: float = 0.26
+    wall: float = 0.016
     scale: tuple[float, float] = (0.88, 1.06)
     depth_median: float = 0.055
     depth_log_sigma: float = 0.85
@@ -121,7 +131,7 @@ class FoundationParams(Params):
         """Positive sizes and counts, shares in [0, 1], ordered ranges (``ValueError``)."""
         if self.faces < 1:
             raise ValueError("foundation 'faces' must be >= 1")
-        for key in ("hidden_flatten", "hole_fraction", "tilt_roll_share"):
+        for key in ("hidden_flatten", "hole_fraction", "tilt_roll_share", "hollow_share"):
             if not 0.0 <= getattr(self, key) <= 1.0:
                 raise ValueError(f"foundation {key!r} must be in [0, 1], got {getattr(self, key)}")
         for key in ("axis_scale", "scale"):
@@ -130,6 +140,8 @@ class FoundationParams(Params):
                 raise ValueError(f"foundation {key!r} must be [min, max] with 0 < min <= max, got {[lo, hi]}")
         if not 0.0 <= self.tilt_min_deg <= self.tilt_max_deg < 90.0:
             raise ValueError("foundation tilt range must satisfy 0 <= tilt_min_deg <= tilt_max_deg < 90")
+        if not 0.0 <= self.wall < 0.25:
+            raise ValueError(f"foundation 'wall' must be in [0, 0.25), got {self.wall}")
         if min(self.hidden_noise, self.depth_median, self.depth_log_sigma, self.depth_max, self.lateral_sigma,
                self.rotation_median_deg, self.rotation_log_sigma, self.rotation_max_deg, self.tilt_sigma_deg) < 0:
             raise ValueError("foundation magnitudes must be >= 0")
@@ -228,6 +240,58 @@ def reconstruct_mesh(world: trimesh.Trimesh, eye: np.ndarray, visible: np.ndarra
     keep[drop] = False
     mesh = trimesh.Trimesh(v, faces[keep], process=False)
     return mesh, {"faces": int(keep.sum()), "visible_share": vis_share, "holes": int(len(drop))}
+
+
+def hollowed(mesh: trimesh.Trimesh, wall: float) -> tuple[trimesh.Trimesh, int]:
+    """``mesh`` with its :func:`inner_wall` (``wall`` metres deep; decimated to at most the mesh's own face
+    count, as the two walls of a real reconstruction share its face budget) added, and the inner wall's faces."""
+    from phiscene.proxies import decimated
+
+    inner = inner_wall(mesh, wall)
+    if len(inner.faces) == 0:
+        return mesh, 0
+    inner = decimated(inner, len(mesh.faces))
+    return trimesh.util.concatenate([mesh, inner]), int(len(inner.faces))
+
+
+#: Grid cells per wall thickness of the signed-distance grid an inner wall is extracted from (:func:`inner_wall`).
+WALL_CELLS = 2.0
+
+
+def inner_wall(mesh: trimesh.Trimesh, wall: float) -> trimesh.Trimesh:
+    """The inner wall of a hollow reconstruction: the surface ``wall`` metres inside ``mesh``, facing inward.
+
+    Marching cubes of the mesh's signed distance at ``-wall`` (:class:`phiscene.sdf.SignedDistance`, on a grid of
+    ``wall / WALL_CELLS`` cells), inverted so that its normals point into the cavity: with the outer surface it
+    encloses the wall only, and the cavity's winding number is 0. Parts thinner than ``2 wall`` have no such
+    surface and stay solid, and so do cavities thinner than ``2 wall`` (the core of a leg just over two walls
+    thick).
+
+    Returns
+    -------
+    trimesh.Trimesh
+        Possibly empty (a thin object).
+    """
+    import igl
+
+    from phiscene.proxies import decimated
+    from phiscene.sdf import SignedDistance
+
+    lo, hi = np.asarray(mesh.bounds, dtype=float)
+    h = wall / WALL_CELLS
+    counts = np.ceil((hi - lo) / h).astype(np.int64) + 3
+    axes = [lo[i] - h + h * np.arange(counts[i]) for i in range(3)]
+    z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")  # libigl: x varies fastest
+    nodes = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
+    values = SignedDistance(decimated(mesh, 5000))(nodes) + wall
+    values[np.abs(values) < 1e-9 * h] = 1e-9 * h
+    if values.min() >= 0:
+        return trimesh.Trimesh()
+    v, f, _ = igl.marching_cubes(values, nodes, int(counts[0]), int(counts[1]), int(counts[2]), 0.0)
+    inner = trimesh.Trimesh(np.asarray(v, dtype=float), np.asarray(f, dtype=np.int64)[:, ::-1], process=False)
+    parts = [c for c in inner.split(only_watertight=False)
+             if len(c.faces) >= 4 and min(trimesh.bounds.oriented_bounds(c.vertices)[1]) >= 2.0 * wall]
+    return trimesh.util.concatenate(parts) if parts else trimesh.Trimesh()
 
 
 # -- poses -----------------------------------------------------------------------------------------------------------
@@ -337,12 +401,16 @@ def foundation_scene(gt: Scene, camera: dict, labels: np.ndarray, params: Founda
     from phiscene.meshes import save_mesh
 
     rng = np.random.default_rng(seed)
+    walls = rng.spawn(1)[0]  # hollowness draws from a child stream: the other draws do not depend on it
     eye = np.asarray(camera["eye"], dtype=float)
     mesh_dir = Path(mesh_dir)
     objects, errors = [], {}
     for k, o in enumerate(gt.objects):
         world = o.world_mesh()
         recon, rec = reconstruct_mesh(world, eye, visible_faces(world, camera, labels, k), rng, params)
+        rec["inner_faces"] = 0
+        if walls.uniform() < params.hollow_share and params.wall > 0:
+            recon, rec["inner_faces"] = hollowed(recon, params.wall * float(np.linalg.norm(world.extents)))
         local = recon.copy()
         local.apply_transform(invert(o.pose))  # back to the object's local frame (scale included)
         axes = rng.uniform(*params.axis_scale, size=3)
