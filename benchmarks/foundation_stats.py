@@ -9,8 +9,14 @@ Per object of every scene: penetration and gap to the nearest neighbour (the phy
 validity, ground included), the translation and rotation error against ground truth (object centres; rotation
 angle) of the model's own draw (the camera-frame scene with the drawn tilt undone) and of the levelled input the
 methods receive (adding the levelling's residual), the scale factor, faces and watertightness of the initial
-mesh; per scene: the drawn gravity tilt and the levelling's residual, and the 2 s pybullet release drift of the
-initial scene (the physical metric's protocol, convex-hull proxies). Prints target vs measured.
+mesh (as loaded, and closed once its vertices are merged) and how hollow it is (the share of its solid in sealed
+cavities of a double wall, :func:`phiscene.solid.cavity_share`); per scene: the drawn gravity tilt and the
+levelling's residual, and the 2 s pybullet release drift of the initial scene (the physical metric's protocol,
+convex-hull proxies). Prints target vs measured.
+
+A suite without ground truth (the real scenes: ``results/scenes/real``) gets the statistics that need none
+(contacts, drift, meshes); ``--hollow-blind`` measures contacts with the raw meshes' winding numbers, as before
+:mod:`phiscene.solid` (a hollow mesh's cavity outside it), to show what the hollow shells hid.
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import trimesh
 
 from phiscene.metrics.drift import drift_bullet
 from phiscene.metrics.physical import PhysicalParams, contact_validity
@@ -43,13 +50,16 @@ TARGETS = {
     "rotation error, levelled input, p90 (deg)": "(11 + levelling)",
     "scale factor min": "0.88", "scale factor max": "1.06", "gravity tilt median (deg)": "14.7",
     "gravity tilt min (deg)": "2.5", "gravity tilt max (deg)": "22", "faces per mesh, median": "~30000",
-    "watertight meshes": "0",
+    "watertight meshes": "0 (files split vertices at texture seams)", "closed once vertices merged (share)": "0.85",
+    "cavity share of the solid, mean": "0.19", "meshes with cavity share >= 0.2": "0.33",
 }
 
 
 def scene_rows(folder: Path, cache: Path, physical: PhysicalParams, sim: SimSettings) -> tuple[list, dict]:
     """Per-object rows and the per-scene record of one built scene folder."""
-    gt = load_scene(folder / "gt" / "scene.json")
+    from phiscene.solid import cavity_share
+
+    gt = load_scene(folder / "gt" / "scene.json") if (folder / "gt" / "scene.json").exists() else None
     initial = load_scene(folder / "initial" / "scene.json")
     tilted = folder / "initial" / "camera_frame.json"
     untilted = None  # the per-object errors alone: the camera-frame scene with the drawn tilt undone exactly
@@ -62,22 +72,25 @@ def scene_rows(folder: Path, cache: Path, physical: PhysicalParams, sim: SimSett
     drift = drift_bullet(initial, proxies, physical, sim, cache)
     rows = []
     for o in initial.objects:
-        g = gt.get(o.id)
-        R0, _, _ = decompose(g.pose)
-        R1, _, s1 = decompose(o.pose)
         w = static[o.id]["w"]
         mesh = o.mesh()
-        model = untilted.get(o.id) if untilted is not None else o
-        rows.append({"scene": folder.name, "id": o.id, "pen_m": static[o.id]["pen_depth"],
-                     "model_translation_m": float(np.linalg.norm(object_centre(model) - object_centre(g))),
-                     "model_rotation_deg": math.degrees(rotation_angle(R0, decompose(model.pose)[0])),
-                     "gap_m": max(w, 0.0) if w is not None else np.nan,
-                     "translation_m": float(np.linalg.norm(object_centre(o) - object_centre(g))),
-                     "rotation_deg": math.degrees(rotation_angle(R0, R1)),
-                     "scale": float(o.meta.get("degrade", {}).get("scale", s1 / decompose(g.pose)[2])),
-                     "faces": len(mesh.faces), "watertight": bool(mesh.is_watertight),
-                     "drift_m": drift["objects"][o.id]["drift_trans"],
-                     "drift_deg": drift["objects"][o.id]["drift_rot"]})
+        row = {"scene": folder.name, "id": o.id, "pen_m": static[o.id]["pen_depth"],
+               "gap_m": max(w, 0.0) if w is not None else np.nan,
+               "faces": len(mesh.faces), "watertight": bool(mesh.is_watertight),
+               "closed": bool(trimesh.Trimesh(mesh.vertices, mesh.faces, process=True).is_watertight),
+               "cavity": cavity_share(mesh),
+               "drift_m": drift["objects"][o.id]["drift_trans"], "drift_deg": drift["objects"][o.id]["drift_rot"]}
+        if gt is not None:
+            g = gt.get(o.id)
+            R0, _, _ = decompose(g.pose)
+            R1, _, s1 = decompose(o.pose)
+            model = untilted.get(o.id) if untilted is not None else o
+            row.update({"model_translation_m": float(np.linalg.norm(object_centre(model) - object_centre(g))),
+                        "model_rotation_deg": math.degrees(rotation_angle(R0, decompose(model.pose)[0])),
+                        "translation_m": float(np.linalg.norm(object_centre(o) - object_centre(g))),
+                        "rotation_deg": math.degrees(rotation_angle(R0, R1)),
+                        "scale": float(o.meta.get("degrade", {}).get("scale", s1 / decompose(g.pose)[2]))})
+        rows.append(row)
     frame = initial.meta.get("frame", {})
     return rows, {"scene": folder.name, "tilt_deg": frame.get("tilt_deg", np.nan),
                   "residual_deg": frame.get("residual_deg", np.nan),
@@ -86,8 +99,10 @@ def scene_rows(folder: Path, cache: Path, physical: PhysicalParams, sim: SimSett
 
 def summary(objects: pd.DataFrame, scenes: pd.DataFrame) -> dict:
     """The measured value of every :data:`TARGETS` entry."""
-    t, r = objects["model_translation_m"] * 100, objects["model_rotation_deg"]
-    tl, rl = objects["translation_m"] * 100, objects["rotation_deg"]
+    nan = pd.Series([np.nan])
+    t, r = (objects.get("model_translation_m", nan) * 100, objects.get("model_rotation_deg", nan))
+    tl, rl = objects.get("translation_m", nan) * 100, objects.get("rotation_deg", nan)
+    scale = objects.get("scale", nan)
     return {
         "penetration mean (mm)": objects["pen_m"].mean() * 1000, "penetration max (mm)": objects["pen_m"].max() * 1000,
         "share penetrating > 1 mm": (objects["pen_m"] > 1e-3).mean(),
@@ -100,10 +115,13 @@ def summary(objects: pd.DataFrame, scenes: pd.DataFrame) -> dict:
         "translation error, levelled input, p90 (cm)": tl.quantile(0.9),
         "rotation error, levelled input, median (deg)": rl.median(),
         "rotation error, levelled input, p90 (deg)": rl.quantile(0.9),
-        "scale factor min": objects["scale"].min(), "scale factor max": objects["scale"].max(),
+        "scale factor min": scale.min(), "scale factor max": scale.max(),
         "gravity tilt median (deg)": scenes["tilt_deg"].median(), "gravity tilt min (deg)": scenes["tilt_deg"].min(),
         "gravity tilt max (deg)": scenes["tilt_deg"].max(), "faces per mesh, median": objects["faces"].median(),
         "watertight meshes": int(objects["watertight"].sum()),
+        "closed once vertices merged (share)": objects["closed"].mean(),
+        "cavity share of the solid, mean": objects["cavity"].mean(),
+        "meshes with cavity share >= 0.2": (objects["cavity"] >= 0.2).mean(),
     }
 
 
@@ -112,7 +130,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("suite_dir", type=Path, help="results/scenes/<suite>")
     ap.add_argument("--cache", type=Path, default=Path("results/cache"))
     ap.add_argument("--csv", type=Path, help="write the per-object rows here")
+    ap.add_argument("--hollow-blind", action="store_true",
+                    help="contacts with the raw meshes' winding numbers (a hollow mesh's cavity counts as outside)")
     args = ap.parse_args(argv)
+    if args.hollow_blind:
+        import phiscene.solid
+
+        phiscene.solid.outer_shell = lambda mesh, params=None: mesh
     folders = sorted(p for p in args.suite_dir.iterdir() if (p / "initial" / "scene.json").exists())
     if not folders:
         print(f"{args.suite_dir}: no built scenes (…/initial/scene.json)", file=sys.stderr)

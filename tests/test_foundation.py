@@ -107,8 +107,11 @@ def test_tilted_frame_is_levelled_back_within_a_few_degrees(boxes, tmp_path):
     assert math.degrees(rotation_angle(np.eye(3), T[:3, :3])) == pytest.approx(rec["tilt_deg"], abs=1e-6)
     # meshes are the reconstructions, not the ground truth's files
     for o, g in zip(made.initial.objects, boxes["gt"].objects):
-        assert o.mesh_path != g.mesh_path and not o.mesh().is_watertight
+        assert o.mesh_path != g.mesh_path
         assert o.meta["degrade"]["faces"] >= SMALL.faces / 2
+        # open reconstructions have holes; the others are closed once their vertices are merged
+        merged = trimesh.Trimesh(o.mesh().vertices, o.mesh().faces, process=True)
+        assert merged.is_watertight == (o.meta["degrade"]["holes"] == 0)
 
 
 def test_same_seed_same_scene_other_seed_other_scene(boxes, tmp_path):
@@ -163,7 +166,7 @@ def test_hollow_reconstructions_are_double_walls_that_the_solid_test_fills(boxes
     from phiscene.bench.foundation import inner_wall
     from phiscene.sdf import SignedDistance, winding_number_exact
 
-    params = FoundationParams(faces=2000, hollow_share=1.0, hole_fraction=0.0)
+    params = FoundationParams(faces=2000, hollow_share=1.0, open_share=0.0)
     made = foundation_scene(boxes["gt"], boxes["camera"], boxes["labels"], params, 7, tmp_path / "meshes")
     hollow = 0
     for o, g in zip(made.initial.objects, boxes["gt"].objects):

@@ -198,26 +198,36 @@ def voxel_shell(mesh: trimesh.Trimesh, params: ShellParams = ShellParams()) -> V
                       deepest=deepest, deepest_region=deepest_region)
 
 
+def hollow_regions(mesh: trimesh.Trimesh, vox: VoxelShell) -> np.ndarray:
+    """Which enclosed regions of ``vox`` are cavities of a double wall, (regions + 1,) bool (index 0: none).
+
+    A cavity has winding number ~0 (the body of a solid 1, the overlap of two solids 2), read exactly
+    (``igl.winding_number``) at the region's deepest voxels; the median decides.
+    """
+    import igl
+
+    hollow = np.zeros(int(vox.regions.max()) + 1, dtype=bool)
+    if len(vox.deepest) == 0:
+        return hollow
+    tri = np.ascontiguousarray(np.asarray(mesh.triangles, dtype=float).reshape(-1, 3))
+    w = igl.winding_number(tri, np.arange(len(tri), dtype=np.int64).reshape(-1, 3), np.ascontiguousarray(vox.deepest))
+    for r in np.unique(vox.deepest_region):
+        hollow[r] = np.median(w[vox.deepest_region == r]) < TOL.winding_inside
+    return hollow
+
+
 def inner_faces(mesh: trimesh.Trimesh, params: ShellParams = ShellParams()) -> np.ndarray:
     """Which faces face a sealed cavity of a double-walled mesh, (f,) bool (see the module text).
 
     All ``False`` when the mesh encloses no cavity, or when fewer than ``min_outer`` of its faces would
     remain.
     """
-    import igl
-
     n_faces = len(mesh.faces)
     vox = voxel_shell(mesh, params)
     inner = np.zeros(n_faces, dtype=bool)
     if not vox.enclosed.any():
         return inner
-    # a cavity of a double wall has winding number ~0; the body of a solid 1, the overlap of two solids 2
-    tri = np.ascontiguousarray(np.asarray(mesh.triangles, dtype=float).reshape(-1, 3))
-    w = igl.winding_number(tri, np.arange(len(tri), dtype=np.int64).reshape(-1, 3), np.ascontiguousarray(vox.deepest))
-    n_regions = int(vox.regions.max())
-    hollow = np.zeros(n_regions + 1, dtype=bool)
-    for r in np.unique(vox.deepest_region):
-        hollow[r] = np.median(w[vox.deepest_region == r]) < TOL.winding_inside
+    hollow = hollow_regions(mesh, vox)
     if not hollow.any():
         return inner
     centres = np.asarray(mesh.triangles_center, dtype=float)
@@ -300,3 +310,18 @@ def solid_surface(mesh: trimesh.Trimesh, resolution: int) -> trimesh.Trimesh:
     values[np.abs(values) < 1e-9 * h] = 1e-9 * h  # a node on the surface is outside: no zero-length edges
     v, f, _ = igl.marching_cubes(values, nodes, int(counts[0]), int(counts[1]), int(counts[2]), 0.0)
     return trimesh.Trimesh(np.asarray(v, dtype=float), np.asarray(f, dtype=np.int64), process=False)
+
+
+def cavity_share(mesh: trimesh.Trimesh, params: ShellParams = ShellParams()) -> float:
+    """Share of the solid's voxels that lie in sealed cavities of a double wall (0 for a solid or open mesh).
+
+    The solid is every voxel the surface passes through or encloses (:func:`voxel_shell`); a cavity is an
+    enclosed region whose winding number is below ``TOL.winding_inside``. The same measure on real and
+    synthetic reconstructions compares how hollow they are (surface voxels count as solid, so a thin object
+    scores low at any wall thickness).
+    """
+    vox = voxel_shell(mesh, params)
+    if not vox.enclosed.any():
+        return 0.0
+    cavity = int(hollow_regions(mesh, vox)[vox.regions].sum())
+    return cavity / float(vox.surface.sum() + vox.enclosed.sum())

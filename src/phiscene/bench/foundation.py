@@ -7,8 +7,8 @@ reference camera and its instance segmentation, every draw from the scene seed:
 1. **Shapes are reconstructions.** Each object's mesh is rebuilt (:func:`reconstruct_mesh`): subdivided to
    tens of thousands of faces (``faces``); the side the reference camera sees is kept, the hidden side is
    flattened along the view ray towards the farthest visible point (``hidden_flatten``) and bumped with low-frequency
-   noise (``hidden_noise``); some hidden faces are dropped, so the mesh is not watertight
-   (``hole_fraction``); its lengths are off per object axis (``axis_scale``: a book too thick, a spoon too
+   noise (``hidden_noise``); in a share of the objects (``open_share``) some hidden faces are dropped, so the
+   mesh is open (``hole_fraction``); its lengths are off per object axis (``axis_scale``: a book too thick, a spoon too
    short); and a share of the objects (``hollow_share``) come out as hollow, double-walled shells, the outer
    surface and an inner one ``wall`` inside it facing a sealed cavity (:func:`inner_wall`), as the sparse-voxel
    surfaces of SAM 3D Objects do (:mod:`phiscene.solid`; parts thinner than two walls stay solid).
@@ -31,9 +31,9 @@ translation error median 5.2 cm, 90th percentile 15.6 cm, max 43 cm, mostly alon
 depth): ``depth_*``, ``lateral_sigma``; rotation error median 3.6 deg, p90 11 deg, max 29 deg: ``rotation_*``;
 per-object scale 0.88-1.06: ``scale``; gravity off by 2.5-22 deg, median 14.7: ``tilt_*``; meshes of about
 30,000 faces, hidden sides guessed or flattened, lengths and thicknesses off: ``faces``, ``hidden_*``,
-``hole_fraction``, ``axis_scale``; 31 of the 117 meshes hollow shells whose walls hold a median 16 % of the solid's
-volume (``benchmarks/hollow_shells.py``; a wall of 1.6 % of a ball's bounding-box diagonal holds 16 % of it):
-``hollow_share``, ``wall``.
+``hole_fraction``, ``axis_scale``; hollow double-walled shells (``benchmarks/hollow_shells.py``: a third of the
+meshes, 39 of 117, hold at least a fifth of their solid in sealed cavities; over all meshes the cavities hold a
+mean 0.19 of the solid, :func:`phiscene.solid.cavity_share`): ``hollow_share``, ``wall``.
 
 What is not modelled: the camera frame's heading and origin (a levelling cannot recover them, and comparing with
 ground truth would need an alignment first), thin parts misplaced, merged or split objects.
@@ -73,7 +73,11 @@ class FoundationParams(Params):
         Standard deviation of the hidden side's low-frequency bumps, relative to the object's bounding-box
         diagonal.
     hole_fraction
-        Share of the hidden faces dropped (the mesh is open; at least one face always is).
+        Share of the hidden faces dropped from an open reconstruction (at least one face always is).
+    open_share
+        Share of the reconstructions that are open (the others are closed once their vertices are merged, as 100
+        of the 117 real meshes are; the real files split vertices along texture seams, so none is watertight
+        as loaded).
     axis_scale
         Range of the per-axis size factor of a reconstruction (object frame).
     hollow_share
@@ -109,8 +113,9 @@ class FoundationParams(Params):
     hidden_flatten: float = 0.6
     hidden_noise: float = 0.005
     hole_fraction: float = 0.01
+    open_share: float = 0.15
     axis_scale: tuple[float, float] = (0.9, 1.08)
-    hollow_share: float = 0.26
+    hollow_share: float = 0.48
     wall: float = 0.016
     scale: tuple[float, float] = (0.88, 1.06)
     depth_median: float = 0.055
@@ -131,7 +136,7 @@ class FoundationParams(Params):
         """Positive sizes and counts, shares in [0, 1], ordered ranges (``ValueError``)."""
         if self.faces < 1:
             raise ValueError("foundation 'faces' must be >= 1")
-        for key in ("hidden_flatten", "hole_fraction", "tilt_roll_share", "hollow_share"):
+        for key in ("hidden_flatten", "hole_fraction", "tilt_roll_share", "hollow_share", "open_share"):
             if not 0.0 <= getattr(self, key) <= 1.0:
                 raise ValueError(f"foundation {key!r} must be in [0, 1], got {getattr(self, key)}")
         for key in ("axis_scale", "scale"):
@@ -179,7 +184,7 @@ def visible_faces(world: trimesh.Trimesh, camera: dict, labels: np.ndarray, inde
 
 
 def reconstruct_mesh(world: trimesh.Trimesh, eye: np.ndarray, visible: np.ndarray, rng: np.random.Generator,
-                     params: FoundationParams) -> tuple[trimesh.Trimesh, dict]:
+                     params: FoundationParams, open_mesh: bool = True) -> tuple[trimesh.Trimesh, dict]:
     """A foundation-model-like reconstruction of a world-frame mesh (module docstring, item 1; no axis scaling).
 
     Parameters
@@ -194,11 +199,14 @@ def reconstruct_mesh(world: trimesh.Trimesh, eye: np.ndarray, visible: np.ndarra
         Random generator.
     params
         Magnitudes.
+    open_mesh
+        Drop hidden faces (``hole_fraction``); the holes are drawn either way, so the generator's stream does
+        not depend on it.
 
     Returns
     -------
     mesh
-        The reconstruction, world frame, open.
+        The reconstruction, world frame (open when ``open_mesh``).
     record
         ``faces``, ``visible_share`` (area share of the visible surface), ``holes`` (faces dropped).
     """
@@ -237,9 +245,10 @@ def reconstruct_mesh(world: trimesh.Trimesh, eye: np.ndarray, visible: np.ndarra
     pool = hidden_faces if len(hidden_faces) else np.arange(len(faces))
     drop = rng.choice(pool, size=min(n_drop, len(pool)), replace=False)
     keep = np.ones(len(faces), dtype=bool)
-    keep[drop] = False
+    if open_mesh:
+        keep[drop] = False
     mesh = trimesh.Trimesh(v, faces[keep], process=False)
-    return mesh, {"faces": int(keep.sum()), "visible_share": vis_share, "holes": int(len(drop))}
+    return mesh, {"faces": int(keep.sum()), "visible_share": vis_share, "holes": int((~keep).sum())}
 
 
 def hollowed(mesh: trimesh.Trimesh, wall: float) -> tuple[trimesh.Trimesh, int]:
@@ -401,15 +410,16 @@ def foundation_scene(gt: Scene, camera: dict, labels: np.ndarray, params: Founda
     from phiscene.meshes import save_mesh
 
     rng = np.random.default_rng(seed)
-    walls = rng.spawn(1)[0]  # hollowness draws from a child stream: the other draws do not depend on it
+    walls = rng.spawn(1)[0]  # open and hollow draws from a child stream: the other draws do not depend on them
     eye = np.asarray(camera["eye"], dtype=float)
     mesh_dir = Path(mesh_dir)
     objects, errors = [], {}
     for k, o in enumerate(gt.objects):
         world = o.world_mesh()
-        recon, rec = reconstruct_mesh(world, eye, visible_faces(world, camera, labels, k), rng, params)
+        open_mesh, hollow = walls.uniform(size=2) < (params.open_share, params.hollow_share)
+        recon, rec = reconstruct_mesh(world, eye, visible_faces(world, camera, labels, k), rng, params, open_mesh)
         rec["inner_faces"] = 0
-        if walls.uniform() < params.hollow_share and params.wall > 0:
+        if hollow and params.wall > 0:
             recon, rec["inner_faces"] = hollowed(recon, params.wall * float(np.linalg.norm(world.extents)))
         local = recon.copy()
         local.apply_transform(invert(o.pose))  # back to the object's local frame (scale included)
