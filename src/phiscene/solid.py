@@ -36,6 +36,11 @@ import trimesh
 from phiscene.params import Params
 from phiscene.tolerances import TOL
 
+#: Fewest voxels of an enclosed region (smaller pockets, in a wall or between two, change no inside test).
+MIN_REGION = 8
+#: Voxels per enclosed region at which its winding number is read (the deepest; the median decides).
+PROBES_PER_REGION = 4
+
 
 @dataclass(frozen=True)
 class ShellParams(Params):
@@ -97,7 +102,7 @@ class VoxelShell:
     regions : (nx, ny, nz) int
         Label of the enclosed region each enclosed voxel belongs to (1, 2, ...; 0 elsewhere).
     deepest : (k, 3) float
-        Centres of each region's voxels farthest from the surface (at most 8 per region).
+        Centres of each region's voxels farthest from the surface (at most ``PROBES_PER_REGION`` per region).
     deepest_region : (k,) int
         The region label of each of them.
     """
@@ -180,8 +185,9 @@ def voxel_shell(mesh: trimesh.Trimesh, params: ShellParams = ShellParams()) -> V
         index = np.arange(1, n + 1)
         depth = np.asarray(ndimage.maximum(dist, labels, index=index))
         own = np.asarray(ndimage.maximum(closed_by_surface, labels, index=index)) > 0
+        size = np.bincount(labels.ravel(), minlength=n + 1)[1:]
         keep = np.zeros(n + 1, dtype=bool)
-        keep[index[own | (depth > params.close + 0.5)]] = True
+        keep[index[(own | (depth > params.close + 0.5)) & (size >= MIN_REGION)]] = True
         renumber = np.cumsum(keep) * keep  # kept labels -> 1, 2, ...
         regions = renumber[labels].astype(np.int32)
         cells = np.flatnonzero(regions)
@@ -190,7 +196,7 @@ def voxel_shell(mesh: trimesh.Trimesh, params: ShellParams = ShellParams()) -> V
             cells = cells[order]
             region_of = regions.ravel()[cells]
             first = np.searchsorted(region_of, np.arange(1, region_of.max() + 1))
-            top = np.arange(len(cells)) - first[region_of - 1] < 8
+            top = np.arange(len(cells)) - first[region_of - 1] < PROBES_PER_REGION
             deepest = origin + (np.stack(np.unravel_index(cells[top], shape), axis=1) + 0.5) * pitch
             deepest_region = region_of[top].astype(np.int64)
         enclosed = regions > 0
@@ -202,15 +208,15 @@ def hollow_regions(mesh: trimesh.Trimesh, vox: VoxelShell) -> np.ndarray:
     """Which enclosed regions of ``vox`` are cavities of a double wall, (regions + 1,) bool (index 0: none).
 
     A cavity has winding number ~0 (the body of a solid 1, the overlap of two solids 2), read exactly
-    (``igl.winding_number``) at the region's deepest voxels; the median decides.
+    (:func:`phiscene.sdf.winding_number_exact`, a few points against every triangle) at the region's deepest
+    voxels; the median decides.
     """
-    import igl
+    from phiscene.sdf import winding_number_exact
 
     hollow = np.zeros(int(vox.regions.max()) + 1, dtype=bool)
     if len(vox.deepest) == 0:
         return hollow
-    tri = np.ascontiguousarray(np.asarray(mesh.triangles, dtype=float).reshape(-1, 3))
-    w = igl.winding_number(tri, np.arange(len(tri), dtype=np.int64).reshape(-1, 3), np.ascontiguousarray(vox.deepest))
+    w = winding_number_exact(np.asarray(mesh.triangles, dtype=float), vox.deepest)
     for r in np.unique(vox.deepest_region):
         hollow[r] = np.median(w[vox.deepest_region == r]) < TOL.winding_inside
     return hollow
