@@ -1,9 +1,15 @@
 """Reference image, instance segmentation and camera of a scene, rendered on the CPU.
 
-Rendering uses pybullet's TinyRenderer (``ER_TINY_RENDERER``) in a DIRECT
-client, so it needs neither a GPU nor a display. Each object becomes a
+Images use pybullet's TinyRenderer (``ER_TINY_RENDERER``) in a DIRECT
+client, so they need neither a GPU nor a display. Each object becomes a
 visual-only body built from a temporary OBJ of its world-frame mesh (flat
-shaded); the ground is a large light-grey slab.
+shaded); the ground is a large light-grey slab. Instance labels (the
+reference segmentation, the masks the alignment metric compares) are cast
+instead (:func:`instance_labels`: open3d's ``RaycastingScene``, one ray
+through each pixel centre of ``camera.json``'s pinhole model against the
+full meshes): 5x faster than a TinyRenderer pass on a 17-object scene of
+30k-face reconstructions (0.5 s against 2.4 s), exact to the documented pixel
+convention (TinyRenderer's segmentation buffer sits half a pixel off it).
 
 ``camera.json`` (format ``phiscene.camera/1``)::
 
@@ -250,14 +256,14 @@ def render(scene: Scene, camera: dict, colors: list | None = None, shadow: bool 
     -------
     rgb : (H, W, 3) uint8
     labels : (H, W) int32
-        Index of the visible object in ``scene.objects``, -1 for ground and background.
+        Index of the visible object in ``scene.objects``, -1 for ground and background
+        (:func:`instance_labels`).
     """
     W, H = int(camera["width"]), int(camera["height"])
     from phiscene.sim.bullet import open_client
 
     client = open_client()
     try:
-        uids = {}
         with tempfile.TemporaryDirectory(prefix="phiscene-render-") as tmp:
             ground = client.createVisualShape(client.GEOM_BOX, halfExtents=[50, 50, 0.05], rgbaColor=[*GROUND_RGB, 1])
             client.createMultiBody(0, -1, ground, basePosition=[0, 0, scene.ground_height - 0.05])
@@ -267,19 +273,52 @@ def render(scene: Scene, camera: dict, colors: list | None = None, shadow: bool 
                 _flat_obj(o.world_mesh(), f)
                 vis = client.createVisualShape(client.GEOM_MESH, fileName=str(f),
                                                rgbaColor=[c / 255 for c in rgb] + [1])
-                uids[client.createMultiBody(0, -1, vis)] = k
-            _, _, px, _, seg = client.getCameraImage(
+                client.createMultiBody(0, -1, vis)
+            _, _, px, _, _ = client.getCameraImage(
                 W, H, viewMatrix=camera["pybullet"]["view_matrix"],
                 projectionMatrix=camera["pybullet"]["projection_matrix"], renderer=client.ER_TINY_RENDERER,
                 shadow=int(shadow), lightDirection=list(light_direction))
     finally:
         client.disconnect()
     rgb = np.asarray(px, dtype=np.uint8).reshape(H, W, 4)[:, :, :3].copy()
-    seg = np.asarray(seg, dtype=np.int64).reshape(H, W)
-    labels = np.full((H, W), -1, dtype=np.int32)
-    for uid, k in uids.items():
-        labels[seg == uid] = k
-    return rgb, labels
+    return rgb, instance_labels(scene, camera)
+
+
+def instance_labels(scene: Scene, camera: dict) -> np.ndarray:
+    """Which object each pixel of ``camera`` sees: one ray through each pixel centre, cast with open3d.
+
+    The ray of pixel ``(u, v)`` leaves the camera centre along ``((u - cx) / fx, (v - cy) / fy, 1)`` in the
+    camera frame (``camera.json``'s convention, the inverse of :func:`project`); the first hit among the
+    objects' world-frame meshes and the ground plane decides.
+
+    Returns
+    -------
+    labels : (H, W) int32
+        Index into ``scene.objects`` of the object hit first, -1 for the ground and for no hit.
+    """
+    import open3d as o3d
+
+    W, H = int(camera["width"]), int(camera["height"])
+    cast = o3d.t.geometry.RaycastingScene()
+    lut = []
+    for k, o in enumerate(scene.objects):
+        m = o.world_mesh()
+        cast.add_triangles(o3d.core.Tensor(np.asarray(m.vertices, dtype=np.float32)),
+                           o3d.core.Tensor(np.asarray(m.faces, dtype=np.uint32)))
+        lut.append(k)
+    g = float(scene.ground_height)
+    cast.add_triangles(o3d.core.Tensor(np.array([[-50, -50, g], [50, -50, g], [50, 50, g], [-50, 50, g]],
+                                                dtype=np.float32)),
+                       o3d.core.Tensor(np.array([[0, 1, 2], [0, 2, 3]], dtype=np.uint32)))
+    lut += [-1, -1]  # the ground, then "no hit" (mapped below)
+    c2w = np.linalg.inv(np.asarray(camera["world_to_camera"], dtype=float))
+    u, v = np.meshgrid(np.arange(W, dtype=float), np.arange(H, dtype=float))
+    d = np.stack([(u - camera["cx"]) / camera["fx"], (v - camera["cy"]) / camera["fy"], np.ones_like(u)], axis=-1)
+    d = d.reshape(-1, 3) @ c2w[:3, :3].T
+    rays = np.hstack([np.broadcast_to(c2w[:3, 3], d.shape), d]).astype(np.float32)
+    hit = cast.cast_rays(o3d.core.Tensor(rays))["geometry_ids"].numpy().astype(np.int64)
+    hit[hit == o3d.t.geometry.RaycastingScene.INVALID_ID] = len(lut) - 1
+    return np.asarray(lut, dtype=np.int32)[hit].reshape(H, W)
 
 
 def render_instance_mask(scene: Scene, camera: dict | str | Path) -> np.ndarray:
@@ -291,8 +330,7 @@ def render_instance_mask(scene: Scene, camera: dict | str | Path) -> np.ndarray:
         Index into ``scene.objects`` of the object seen at each pixel, -1 where none.
     """
     cam = camera if isinstance(camera, dict) else read_camera(camera)
-    _, labels = render(scene, cam, shadow=False)
-    return labels
+    return instance_labels(scene, cam)
 
 
 def labels_to_colors(labels: np.ndarray, colors: list) -> np.ndarray:
