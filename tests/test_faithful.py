@@ -582,3 +582,19 @@ def test_fitting_point_stays_bounded_on_a_large_densely_sampled_surface():
     p = fitting_point(xy, square, np.array([2.0, 0.0]))
     assert time.perf_counter() - t0 < 2.0
     assert p is not None and 1.0 - 0.3 - 0.1 <= p[0] <= 1.0 - 0.3 and abs(p[1]) < 0.05
+
+
+@pytest.mark.parametrize("through, lifted", [(0.04, True), (0.15, False)])
+def test_an_attached_object_through_the_floor_is_lifted_onto_it_within_reach(work, through, lifted):
+    # a tall thin panel fixed to an unknown wall (holder: the ground), its bottom `through` below the floor: a
+    # floor-length curtain a depth error pushed through the floor rests on it after grounding, unless it reaches
+    # deeper than the attachment reach (then it is left as the input has it)
+    pose = make_pose(translation=(0.0, 0.0, 0.15 - through))  # the column is 0.3 tall: bottom at -through
+    scene = scene_of(work, {"column": ("column", pose)})
+    g = graph_of(scene, [("ground", "column", "attached")])
+    out, rec = run(work, scene, g, attached={"column": "ground"})
+    lo, _ = out.get("column").world_mesh().bounds
+    assert lo[2] == pytest.approx(0.0 if lifted else -through, abs=1e-9)
+    assert np.allclose(out.get("column").pose[:3, :2], pose[:3, :2])  # never turned
+    assert np.allclose(out.get("column").pose[:2, 3], pose[:2, 3])  # nor moved sideways
+    assert rec["objects"]["column"]["attach_lift"] == pytest.approx(through if lifted else 0.0, abs=1e-9)

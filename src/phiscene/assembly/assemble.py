@@ -283,15 +283,28 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
 def _flush_attached(scene: Scene, oid: str, obj, proxy: Proxy | None, holder: str, max_angle_deg: float,
                     cache_dir: Path, rec: dict) -> np.ndarray:
     """The pose (4, 4) of an attached object made flush with the wall or ceiling holding it
-    (:func:`~phiscene.assembly.faithful.flush_attached`); its input pose when the holder is not a plane of
-    ``scene.structure`` (the ground stands for an unknown wall). Fills ``rec`` (``flush_angle`` deg,
-    ``attach_shift`` m)."""
-    import trimesh
-
+    (:func:`~phiscene.assembly.faithful.flush_attached`; its input pose when the holder is not a plane of
+    ``scene.structure``: the ground stands for an unknown wall), then lifted out of the floor when its mesh
+    reaches at most ``ATTACH_REACH`` below it (a floor-length curtain a depth error pushed through the floor;
+    lifting it slides it along its wall). Fills ``rec`` (``flush_angle`` deg, ``attach_shift`` m,
+    ``attach_lift`` m)."""
     pose = np.asarray(obj.pose, dtype=float)
     plane = next((q for q in scene.structure if q.id == holder), None)
-    if plane is None:
-        return pose
+    out = pose if plane is None else _flushed_on(plane, obj, proxy, pose, max_angle_deg, cache_dir, rec)
+    below = scene.ground_height - float(transform_points(out, np.asarray(obj.mesh().vertices))[:, 2].min())
+    lift = below if 0.0 < below <= fa.ATTACH_REACH else 0.0
+    if lift:
+        out = out.copy()
+        out[2, 3] += lift
+    rec["attach_lift"] = _round(lift)
+    return out
+
+
+def _flushed_on(plane, obj, proxy: Proxy | None, pose: np.ndarray, max_angle_deg: float, cache_dir: Path,
+                rec: dict) -> np.ndarray:
+    """``pose`` made flush with ``plane`` (:func:`~phiscene.assembly.faithful.flush_attached`); fills ``rec``."""
+    import trimesh
+
     points = np.vstack(proxy.hulls) if proxy is not None and proxy.hulls else np.asarray(obj.mesh().vertices)
     hull = trimesh.convex.convex_hull(points)
     normals = _resting_normals(hull.vertices, cache_dir)
