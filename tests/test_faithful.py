@@ -364,6 +364,31 @@ def test_penetration_solve_pushes_along_the_normal_with_steepest(tmp_path, optim
         assert sideways == pytest.approx(along / 1.4 * math.hypot(1 - 0.6 * 1.4, 1 - 0.8 * 1.4), rel=0.05)
 
 
+
+def test_direction_search_replaces_a_longer_gradient_solve(tmp_path):
+    """A cube 2 cm into a wall whose normal is 16 deg off the x axis: the smallest clearing translation is
+    (2 cm + eps) along the normal. Adam moves x and z by equal steps, 58 deg off the normal, so it clears the
+    wall only after a longer move; the direction search finds a ray within the Fibonacci lattice's spacing of
+    the normal, and its shorter translation replaces Adam's."""
+    from phiscene.assembly.penetration import PenetrationParams, resolve_penetration, sdf_body
+    from phiscene.scene import Plane
+
+    n = np.array([0.96, 0.0, 0.28])
+    cube = trimesh.creation.box((0.1, 0.1, 0.1))
+    depth = 0.02
+    pose = make_pose(translation=n * (0.05 * np.abs(n).sum() - depth))
+    lengths = {}
+    for k in (0, 32):
+        pp = PenetrationParams(optimizer="adam", search_directions=k)
+        active = sdf_body("cube", cube, pose, pp.n_active, pp, tmp_path)
+        x, info = resolve_penetration(active, [], None, pp, [Plane("wall_0", "wall", tuple(n), 0.0)])
+        assert info["final_loss"] == 0.0 and x @ n >= depth
+        lengths[k] = float(np.linalg.norm(x))
+    shortest = depth + PenetrationParams().eps
+    assert lengths[0] > 1.1 * shortest  # Adam: the long way
+    # 32 lattice directions leave no direction farther than 25 deg from some ray: 1 / cos(25 deg) = 1.10
+    assert lengths[32] <= shortest / math.cos(math.radians(25.0)) + 1e-4 < lengths[0]
+
 # -- pose metrics -------------------------------------------------------------------------------------------
 def test_pose_metrics_analytic(work):
     a = make_pose(translation=(0.0, 0.0, 0.05))
@@ -488,6 +513,12 @@ def test_flush_attached_makes_a_tilted_wall_shelf_level_and_puts_its_back_on_the
     assert angle == pytest.approx(math.degrees(Rotation.from_matrix(R).magnitude()), abs=1e-6)
     assert shift == pytest.approx(0.02, abs=1e-9)
     assert np.allclose(out[:3, 3], (0.0, -0.09, 1.0), atol=1e-9)
+    # 25 cm into the wall, beyond the reach that bounds a move towards the wall: nothing fixed to a wall is inside
+    # it, so it comes out all the same, by exactly its depth
+    deep = make_pose(np.eye(3), (0.0, -0.09 + 0.25, 1.0))
+    out, _, shift = flush_attached(deep, resting_normals(board.vertices), np.zeros(3), board.vertices, wall, 0.0,
+                                   True, 20.0)
+    assert shift == pytest.approx(0.25, abs=1e-9) and np.allclose(out[:3, 3], (0.0, -0.09, 1.0), atol=1e-9)
 
 
 def test_flush_attached_on_a_ceiling_keeps_the_heading_and_leaves_large_errors():
@@ -598,3 +629,23 @@ def test_an_attached_object_through_the_floor_is_lifted_onto_it_within_reach(wor
     assert np.allclose(out.get("column").pose[:3, :2], pose[:3, :2])  # never turned
     assert np.allclose(out.get("column").pose[:2, 3], pose[:2, 3])  # nor moved sideways
     assert rec["objects"]["column"]["attach_lift"] == pytest.approx(through if lifted else 0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("onto_reach", [0.3, 0.0])
+def test_an_object_over_nothing_goes_onto_a_surface_nearer_than_the_floor(work, onto_reach):
+    # a box 1 m up, beside a shelf fixed in place (top at 0.72 m, its edge 21 cm away horizontally): the shelf top
+    # is 31 cm from the box's bottom, beyond onto_reach, but the floor it would fall to is 95 cm away; the nearer
+    # surface wins. With the onto remedy off it falls to the floor.
+    shelf = make_pose(translation=(0.0, 0.0, 0.7))
+    box = make_pose(translation=(0.36, 0.0, 1.0))
+    scene = scene_of(work, {"slab": ("slab", shelf), "box": ("box", box)})
+    g = graph_of(scene, [("ground", "slab", "attached"), ("ground", "box", "supports")])
+    out, rec = run(work, scene, g, params={"faithful": {"enabled": True, "onto_reach": onto_reach}},
+                   attached={"slab": "ground"})
+    lo, hi = out.get("box").world_mesh().bounds
+    if onto_reach == 0:
+        assert lo[2] == pytest.approx(0.0, abs=2e-3)
+        return
+    assert lo[2] == pytest.approx(0.72, abs=5e-3)  # on the shelf
+    assert hi[0] <= 0.15 + 1e-3  # wholly over it
+    assert rec["objects"]["box"]["certificate"]["settled"]

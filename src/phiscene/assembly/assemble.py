@@ -562,11 +562,15 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
             # fell or slid off every time, only balances on an edge or its carriers give way under it: its input
             # is off its supporter or over its edge (depth error); move it onto the nearest supporting surface,
             # inside its edge (the graph may name the wrong supporter), from where the input put it: carried
-            # by a supporter the graph got wrong, it may have gone far
+            # by a supporter the graph got wrong, it may have gone far. Any surface nearer than where it went
+            # anyway (a can over nothing falls a metre to the floor; the wall shelf its depth error took it off
+            # is 31 cm away) is nearer to the input than that
             here = pose.copy()
             here[:3, 3] += fa.com_world(info["input"], info["com"]) - fa.com_world(pose, info["com"])
             points = transform_points(here, np.vstack(proxy.hulls))
-            onto = fa.onto_start(here, info["com"], points, info["surfaces"](info["placed"]), fp.onto_reach,
+            went = [t["travel"] for t in tried if math.isfinite(t["travel"])]
+            reach = max(fp.onto_reach, min(went)) if went else fp.onto_reach
+            onto = fa.onto_start(here, info["com"], points, info["surfaces"](info["placed"]), reach,
                                  fp.contact_tol / 2, info["walls"])
             if onto is not None and onto[1] > 1e-3:
                 attempt(f"onto {onto[1]:.3f} m", onto[0], origin=onto[0])

@@ -355,7 +355,8 @@ def flush_attached(pose: np.ndarray, normals_local: np.ndarray, com_local: np.nd
        roughly perpendicular to the wall, face straight down within the wall's plane (upright; skipped beyond
        ``max_angle_deg``); a ceiling leaves the turn about the vertical free;
     3. a translation along the normal puts its hull's farthest point behind or nearest point in front exactly on
-       the plane, when that is at most ``reach`` away.
+       the plane: always from behind it (nothing fixed to a wall is inside it: a depth error put a wall shelf
+       21 cm into its wall, and what stood on it fell to the floor), from in front when at most ``reach`` away.
 
     Parameters
     ----------
@@ -376,7 +377,7 @@ def flush_attached(pose: np.ndarray, normals_local: np.ndarray, com_local: np.nd
     max_angle_deg
         Largest rotation of steps 1 and 2 (deg).
     reach
-        Largest translation of step 3 (m).
+        Largest translation of step 3 from in front of the plane (m).
 
     Returns
     -------
@@ -413,7 +414,7 @@ def flush_attached(pose: np.ndarray, normals_local: np.ndarray, com_local: np.nd
                 out = make_pose(Q @ R, c - Q @ (c - t), s)
     turned = math.degrees(rotation_angle(decompose(pose)[0], decompose(out)[0]))
     gap = float((transform_points(out, np.asarray(hull_local, dtype=float)) @ n + offset).min())
-    shift = -gap if abs(gap) <= reach else 0.0
+    shift = -gap if gap < 0.0 or gap <= reach else 0.0
     out[:3, 3] += shift * n
     return out, turned, shift
 

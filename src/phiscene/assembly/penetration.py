@@ -52,7 +52,11 @@ Choices the paper leaves open, and what we do:
   ``planar``) are marched out together in steps of ``search_step``, up to ``search_reach``; the first
   translation with a zero loss is bisected back to the zero-loss boundary. That is the smallest
   translation that clears the overlap, to the step's resolution, wherever the gradient stalls. The
-  paper's loop keeps it off (0).
+  paper's loop keeps it off (0). The same search also checks a gradient solve that cleared the overlap by a
+  long way (longer than ``rotate_over``): the gradient of a sum of hinge terms need not point along the
+  shortest way out (a plate sunk 3 cm into the box it lies on, its rim over the box's edge, was pushed 18
+  cm sideways), so the shorter of the two is taken. An object supported from below is never searched
+  downwards (into or under its supporter).
 * Rotation where translation alone cannot do it (``rotate_over > 0``): a plank jammed across a gap,
   each end inside a neighbour from opposite sides, clears by a small turn while a translation must slide
   it out lengthwise. When the translation found is longer than ``rotate_over`` (or none clears), the same
@@ -443,8 +447,8 @@ def resolve_penetration(active: SdfBody, context: list[SdfBody], ground_height: 
         Clear the context objects and the walls by horizontal motion only (the translation's vertical part
         moves the object out of the ground only); see the module notes. Implies ``yaw_only``.
     yaw_only
-        The rotation solve (``params.rotate_over``) turns the object about the vertical only (an object resting
-        on a supporter, made flush with it, stays flush).
+        The object rests on a supporter: the rotation solve (``params.rotate_over``) turns it about the vertical
+        only (made flush with its supporter, it stays flush), and the direction search never moves it down.
 
     Returns
     -------
@@ -466,11 +470,20 @@ def resolve_penetration(active: SdfBody, context: list[SdfBody], ground_height: 
         base = np.zeros(3)
         if planar and ground_height is not None:  # only the ground moves a floor-standing object vertically
             base[2] = max(0.0, params.eps - (float(loss_fn.G.min()) - ground_height))
-        found = min_translation_search(loss_fn, base, search_directions(params.search_directions, planar),
+        found = min_translation_search(loss_fn, base, _directions(params.search_directions, planar, yaw_only),
                                        params.search_step, params.search_reach, params.backtrack_steps)
         if found is not None:
             x = found
             info.update(searched=True, final_loss=0.0)
+    elif params.search_directions > 0 and float(np.linalg.norm(x)) > max(params.rotate_over, params.search_step):
+        base = np.zeros(3)
+        if planar and ground_height is not None:
+            base[2] = max(0.0, params.eps - (float(loss_fn.G.min()) - ground_height))
+        found = min_translation_search(loss_fn, base, _directions(params.search_directions, planar, yaw_only),
+                                       params.search_step, float(np.linalg.norm(x)), params.backtrack_steps)
+        if found is not None and float(np.linalg.norm(found)) < float(np.linalg.norm(x)):
+            x = found
+            info["searched"] = True
     info["rotation"] = [0.0, 0.0, 0.0]
     info["pivot"] = [float(v) for v in loss_fn.pivot]
     if params.rotate_over > 0 and (info["final_loss"] > 0.0 or float(np.linalg.norm(x)) > params.rotate_over):
@@ -508,6 +521,13 @@ def _rigid_solve(loss_fn: "_Loss", params: PenetrationParams) -> tuple[np.ndarra
     if loss_fn.yaw_only:
         w = w * np.array([0.0, 0.0, 1.0])
     return v[:3], w, info
+
+
+def _directions(n: int, planar: bool, supported: bool) -> np.ndarray:
+    """The search's directions: :func:`search_directions`, without the downward ones for an object supported
+    from below (clearing an overlap downwards would put it into or under its supporter)."""
+    d = search_directions(n, planar)
+    return d[d[:, 2] >= 0.0] if supported and not planar else d
 
 
 def search_directions(n: int, planar: bool = False) -> np.ndarray:
