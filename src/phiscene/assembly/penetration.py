@@ -466,22 +466,23 @@ def resolve_penetration(active: SdfBody, context: list[SdfBody], ground_height: 
     x, info = minimize_hinge(loss_fn, (3,), params.lr, params.max_iterations, params.backtrack_steps,
                              params.optimizer)
     info["searched"] = False
-    if info["final_loss"] > 0.0 and params.search_directions > 0:
+
+    def search(reach: float) -> np.ndarray | None:
         base = np.zeros(3)
         if planar and ground_height is not None:  # only the ground moves a floor-standing object vertically
             base[2] = max(0.0, params.eps - (float(loss_fn.G.min()) - ground_height))
-        found = min_translation_search(loss_fn, base, _directions(params.search_directions, planar, yaw_only),
-                                       params.search_step, params.search_reach, params.backtrack_steps)
+        return min_translation_search(loss_fn, base, _directions(params.search_directions, planar, yaw_only),
+                                      params.search_step, reach, params.backtrack_steps)
+
+    length = float(np.linalg.norm(x))
+    if info["final_loss"] > 0.0 and params.search_directions > 0:
+        found = search(params.search_reach)
         if found is not None:
             x = found
             info.update(searched=True, final_loss=0.0)
-    elif params.search_directions > 0 and float(np.linalg.norm(x)) > max(params.rotate_over, params.search_step):
-        base = np.zeros(3)
-        if planar and ground_height is not None:
-            base[2] = max(0.0, params.eps - (float(loss_fn.G.min()) - ground_height))
-        found = min_translation_search(loss_fn, base, _directions(params.search_directions, planar, yaw_only),
-                                       params.search_step, float(np.linalg.norm(x)), params.backtrack_steps)
-        if found is not None and float(np.linalg.norm(found)) < float(np.linalg.norm(x)):
+    elif params.search_directions > 0 and length > max(params.rotate_over, params.search_step):
+        found = search(length)  # a shorter way out than the gradient's
+        if found is not None and float(np.linalg.norm(found)) < length:
             x = found
             info["searched"] = True
     info["rotation"] = [0.0, 0.0, 0.0]
