@@ -123,3 +123,17 @@ def test_penetration_into_the_cavity_of_a_hollow_object_is_measured():
     w = worst_pair_distance(sample_surface(ball, 512, 0), signed_distance_for(ball),
                             sample_surface(hollow, 512, 0), signed_distance_for(hollow))
     assert w == pytest.approx(-0.08, abs=0.004)
+
+
+def test_cavity_share_of_a_double_wall_is_the_ball_inside_its_inner_wall():
+    from phiscene.solid import ShellParams, cavity_share
+
+    mesh, _ = double_wall(radius=0.1, wall=0.004)
+    params = ShellParams()
+    share = cavity_share(mesh, params)
+    # the cavity is the ball inside the inner wall less the voxels the inner wall passes through (a band about
+    # one voxel deep); the solid is the ball of the outer wall (the voxels it encloses or passes through)
+    h = 0.2 / params.resolution
+    lo, hi = ((0.096 - 1.5 * h) / (0.1 + 0.5 * h)) ** 3, (0.096 / 0.1) ** 3
+    assert lo <= share <= hi
+    assert cavity_share(trimesh.creation.icosphere(4, 0.1), params) == 0.0  # a solid ball: no cavity
