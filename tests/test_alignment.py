@@ -1,6 +1,6 @@
 """Tests of the reference alignment metrics (phiscene.metrics.alignment).
 
-The reference folder is made the way the benchmark builder makes it (camera_for, render,
+The reference folder is made the way the benchmark builder makes it (camera_for, instance_labels,
 labels_to_colors, save_png) from a small scene of boxes; oracles are exact mask IoUs of known
 masks, the GT scene against its own reference, objects shifted by their own width or out of
 view, and pose changes of known rigid motions.
@@ -19,9 +19,9 @@ from phiscene.metrics.alignment import AlignmentParams, alignment_metrics, mask_
 from phiscene.render import (
     RenderParams,
     camera_for,
+    instance_labels,
     labels_to_colors,
     load_png,
-    render,
     save_png,
     segmentation_colors,
 )
@@ -44,7 +44,7 @@ def _scene(tmp, boxes=BOXES) -> Scene:
 
 def _write_reference(root, gt: Scene, camera: dict) -> None:
     """The benchmark's reference folder (see phiscene.bench.build._write_outputs) plus gt/scene.json."""
-    _, labels = render(gt, camera)
+    labels = instance_labels(gt, camera)
     write_json(root / "reference" / "camera.json", camera)
     save_png(labels_to_colors(labels, [o.color for o in gt.objects]), root / "reference" / "segmentation.png")
     save_scene(gt, root / "gt" / "scene.json")
@@ -209,7 +209,6 @@ def test_params_from_dict():
 
 def test_instance_labels_are_the_first_box_each_pixel_ray_hits(tmp_path):
     """Oracle: the slab test of every pixel's ray (camera.json's pinhole model) against each axis-aligned box."""
-    from phiscene.render import instance_labels
 
     gt = _scene(tmp_path)
     camera = camera_for(gt, RenderParams(width=96, height=72))

@@ -20,7 +20,7 @@ from phiscene.bench.foundation import (
     subdivided,
     visible_faces,
 )
-from phiscene.render import RenderParams, camera_for, render
+from phiscene.render import RenderParams, camera_for, instance_labels
 from phiscene.scene import Scene, SceneObject
 from phiscene.transforms import decompose, make_pose, rotation_angle
 
@@ -38,7 +38,7 @@ def boxes(tmp_path_factory):
     gt = Scene([SceneObject(oid, meshes[name], pose, color=(40 * i, 80, 120))
                 for i, (oid, (name, pose)) in enumerate(placements.items())])
     camera = camera_for(gt, RenderParams(width=320, height=240))
-    _, labels = render(gt, camera, shadow=False)
+    labels = instance_labels(gt, camera)
     return {"root": root, "gt": gt, "camera": camera, "labels": labels}
 
 

@@ -447,7 +447,7 @@ def before_after(initial_scene: Scene, method_scene: Scene, camera_json: str | P
         fig = _figure(fw, fh)
         for r, (view_name, c) in enumerate(views):
             for k, (scene, name) in enumerate(zip((initial_scene, method_scene), labels)):
-                rgb, _ = render(scene, c)
+                rgb = render(scene, c)
                 left = GAP_PX + k * (W + GAP_PX)
                 top = GAP_PX + r * (H + CAPTION_PX + GAP_PX) + CAPTION_PX
                 ax = fig.add_axes((left / fw, 1 - (top + H) / fh, W / fw, H / fh))

@@ -237,7 +237,7 @@ def _flat_obj(mesh, path: Path) -> None:
 
 
 def render(scene: Scene, camera: dict, colors: list | None = None, shadow: bool = True,
-           light_direction=(0.4, -0.6, 1.0)) -> tuple[np.ndarray, np.ndarray]:
+           light_direction=(0.4, -0.6, 1.0)) -> np.ndarray:
     """Render ``scene`` from ``camera`` with TinyRenderer.
 
     Parameters
@@ -255,9 +255,7 @@ def render(scene: Scene, camera: dict, colors: list | None = None, shadow: bool 
     Returns
     -------
     rgb : (H, W, 3) uint8
-    labels : (H, W) int32
-        Index of the visible object in ``scene.objects``, -1 for ground and background
-        (:func:`instance_labels`).
+        The image (its instance labels: :func:`instance_labels`).
     """
     W, H = int(camera["width"]), int(camera["height"])
     from phiscene.sim.bullet import open_client
@@ -280,8 +278,7 @@ def render(scene: Scene, camera: dict, colors: list | None = None, shadow: bool 
                 shadow=int(shadow), lightDirection=list(light_direction))
     finally:
         client.disconnect()
-    rgb = np.asarray(px, dtype=np.uint8).reshape(H, W, 4)[:, :, :3].copy()
-    return rgb, instance_labels(scene, camera)
+    return np.asarray(px, dtype=np.uint8).reshape(H, W, 4)[:, :, :3].copy()
 
 
 def instance_labels(scene: Scene, camera: dict) -> np.ndarray:
@@ -300,17 +297,15 @@ def instance_labels(scene: Scene, camera: dict) -> np.ndarray:
 
     W, H = int(camera["width"]), int(camera["height"])
     cast = o3d.t.geometry.RaycastingScene()
-    lut = []
-    for k, o in enumerate(scene.objects):
+    for o in scene.objects:  # geometry ids 0 .. n - 1 in object order
         m = o.world_mesh()
         cast.add_triangles(o3d.core.Tensor(np.asarray(m.vertices, dtype=np.float32)),
                            o3d.core.Tensor(np.asarray(m.faces, dtype=np.uint32)))
-        lut.append(k)
+    lut = [*range(len(scene.objects)), -1, -1]  # the objects, the ground, then "no hit" (mapped below)
     g = float(scene.ground_height)
     cast.add_triangles(o3d.core.Tensor(np.array([[-50, -50, g], [50, -50, g], [50, 50, g], [-50, 50, g]],
                                                 dtype=np.float32)),
                        o3d.core.Tensor(np.array([[0, 1, 2], [0, 2, 3]], dtype=np.uint32)))
-    lut += [-1, -1]  # the ground, then "no hit" (mapped below)
     c2w = np.linalg.inv(np.asarray(camera["world_to_camera"], dtype=float))
     u, v = np.meshgrid(np.arange(W, dtype=float), np.arange(H, dtype=float))
     d = np.stack([(u - camera["cx"]) / camera["fx"], (v - camera["cy"]) / camera["fy"], np.ones_like(u)], axis=-1)

@@ -49,7 +49,15 @@ from phiscene.bench.templates import (
 from phiscene.meshes import save_mesh
 from phiscene.params import Params
 from phiscene.proxies import ProxyParams
-from phiscene.render import RenderParams, camera_for, labels_to_colors, render, save_png, segmentation_colors
+from phiscene.render import (
+    RenderParams,
+    camera_for,
+    instance_labels,
+    labels_to_colors,
+    render,
+    save_png,
+    segmentation_colors,
+)
 from phiscene.scene import Scene, SceneObject, save_scene
 from phiscene.sim.settings import SimSettings
 
@@ -181,7 +189,8 @@ def _attempt(suite: str, template: str, n_objects: int, library: tuple, rng: np.
     if gt.problem:
         return gt, gt.problem, None, None
     camera = camera_for(gt.scene, p.render)
-    rgb, labels = render(gt.scene, camera, shadow=p.render.shadow, light_direction=p.render.light_direction)
+    rgb = render(gt.scene, camera, shadow=p.render.shadow, light_direction=p.render.light_direction)
+    labels = instance_labels(gt.scene, camera)
     counts = np.bincount(labels[labels >= 0].ravel(), minlength=len(scene.objects))
     hidden = [o.id for o, c in zip(gt.scene.objects, counts) if c < p.render.min_visible_pixels]
     if hidden:
