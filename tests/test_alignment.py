@@ -209,7 +209,6 @@ def test_params_from_dict():
 
 def test_instance_labels_are_the_first_box_each_pixel_ray_hits(tmp_path):
     """Oracle: the slab test of every pixel's ray (camera.json's pinhole model) against each axis-aligned box."""
-
     gt = _scene(tmp_path)
     camera = camera_for(gt, RenderParams(width=96, height=72))
     labels = instance_labels(gt, camera)
