@@ -191,7 +191,7 @@ def voxel_shell(mesh: trimesh.Trimesh, params: ShellParams = ShellParams()) -> V
         renumber = np.cumsum(keep) * keep  # kept labels -> 1, 2, ...
         regions = renumber[labels].astype(np.int32)
         cells = np.flatnonzero(regions)
-        if len(cells):  # the (at most 8) deepest voxels of each kept region
+        if len(cells):  # the (at most PROBES_PER_REGION) deepest voxels of each kept region
             order = np.lexsort((-dist.ravel()[cells], regions.ravel()[cells]))
             cells = cells[order]
             region_of = regions.ravel()[cells]
@@ -301,19 +301,41 @@ def solid_surface(mesh: trimesh.Trimesh, resolution: int) -> trimesh.Trimesh:
     trimesh.Trimesh
         Watertight unless the mesh is too thin for the grid (then possibly empty).
     """
-    import igl
-
     from phiscene.sdf import signed_distance_for
 
     lo, hi = np.asarray(mesh.bounds, dtype=float)
     h = float((hi - lo).max()) / resolution
     counts = np.ceil((hi - lo) / h).astype(np.int64) + 5
     start = 0.5 * (lo + hi) - 0.5 * h * (counts - 1)
-    axes = [start[i] + h * np.arange(counts[i]) for i in range(3)]
+    return grid_surface([start[i] + h * np.arange(counts[i]) for i in range(3)], h, signed_distance_for(mesh))
+
+
+def grid_surface(axes: list[np.ndarray], cell: float, distance, level: float = 0.0) -> trimesh.Trimesh:
+    """Marching cubes (libigl) of ``distance - level`` on the regular grid of ``axes``.
+
+    Parameters
+    ----------
+    axes
+        Three increasing node coordinate arrays (nx,), (ny,), (nz,) of spacing ``cell``.
+    distance
+        ``distance(nodes (n, 3)) -> (n,)``, a signed distance (negative inside).
+    level
+        The isovalue; a node within ``1e-9 cell`` of it counts as outside (no zero-length edges).
+
+    Returns
+    -------
+    trimesh.Trimesh
+        Empty when no node is inside; otherwise oriented like ``distance`` (normals towards larger values).
+    """
+    import igl
+
+    counts = [len(a) for a in axes]
     z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")  # libigl: x varies fastest
     nodes = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
-    values = signed_distance_for(mesh)(nodes)
-    values[np.abs(values) < 1e-9 * h] = 1e-9 * h  # a node on the surface is outside: no zero-length edges
+    values = np.asarray(distance(nodes), dtype=float) - level
+    values[np.abs(values) < 1e-9 * cell] = 1e-9 * cell
+    if values.min() >= 0:
+        return trimesh.Trimesh()
     v, f, _ = igl.marching_cubes(values, nodes, int(counts[0]), int(counts[1]), int(counts[2]), 0.0)
     return trimesh.Trimesh(np.asarray(v, dtype=float), np.asarray(f, dtype=np.int64), process=False)
 

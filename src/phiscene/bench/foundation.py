@@ -281,23 +281,18 @@ def inner_wall(mesh: trimesh.Trimesh, wall: float) -> trimesh.Trimesh:
     trimesh.Trimesh
         Possibly empty (a thin object).
     """
-    import igl
-
     from phiscene.proxies import decimated
     from phiscene.sdf import SignedDistance
+    from phiscene.solid import grid_surface
 
     lo, hi = np.asarray(mesh.bounds, dtype=float)
     h = wall / WALL_CELLS
     counts = np.ceil((hi - lo) / h).astype(np.int64) + 3
-    axes = [lo[i] - h + h * np.arange(counts[i]) for i in range(3)]
-    z, y, x = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")  # libigl: x varies fastest
-    nodes = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
-    values = SignedDistance(decimated(mesh, 5000))(nodes) + wall
-    values[np.abs(values) < 1e-9 * h] = 1e-9 * h
-    if values.min() >= 0:
-        return trimesh.Trimesh()
-    v, f, _ = igl.marching_cubes(values, nodes, int(counts[0]), int(counts[1]), int(counts[2]), 0.0)
-    inner = trimesh.Trimesh(np.asarray(v, dtype=float), np.asarray(f, dtype=np.int64)[:, ::-1], process=False)
+    surface = grid_surface([lo[i] - h + h * np.arange(counts[i]) for i in range(3)], h,
+                           SignedDistance(decimated(mesh, 5000)), level=-wall)
+    if len(surface.faces) == 0:
+        return surface
+    inner = trimesh.Trimesh(surface.vertices, surface.faces[:, ::-1], process=False)
     parts = [c for c in inner.split(only_watertight=False)
              if len(c.faces) >= 4 and min(trimesh.bounds.oriented_bounds(c.vertices)[1]) >= 2.0 * wall]
     return trimesh.util.concatenate(parts) if parts else trimesh.Trimesh()
