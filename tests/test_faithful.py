@@ -143,6 +143,54 @@ def test_column_straddling_a_step_is_shifted_to_stand(work, max_shift):
     assert cert["joint_stable"]
 
 
+@pytest.mark.parametrize("max_shift", [0.09, 0.0])
+def test_block_tipping_off_an_edge_without_going_far_is_shifted_back_flat(work, max_shift):
+    # the 0.2 m block lies on the 0.1 m box (top at z = 0.1, edge at x = 0.05) with its centre of mass 2 cm beyond
+    # the edge: it tips over the edge and comes to rest leaning from it to the floor, turned well past max_turn but
+    # its centre of mass moved less than max_shift. Shifted back by the slide bound (3 cm) its centre of mass lies
+    # 1 cm inside the edge, 2.5 cm up: it lies flat and holds up to atan(1/2.5) = 22 deg of tilt.
+    pose = make_pose(translation=(0.07, 0.0, 0.1 + 0.025 + 0.001))
+    scene = scene_of(work, {"box": ("box", make_pose(translation=(0.0, 0.0, 0.05))), "block": ("block", pose)})
+    g = graph_of(scene, [("ground", "box", "supports"), ("box", "block", "supports")])
+    out, rec = run(work, scene, g, params={"faithful": {"enabled": True, "max_shift": max_shift, "onto_reach": 0}})
+    R, t, _ = decompose(out.get("block").pose)
+    tilt = math.degrees(math.acos(min(1.0, R[2, 2])))
+    cert = rec["objects"]["block"]["certificate"]
+    if max_shift == 0:  # without the remedy: it tips, yet moves less than a shift, so it is kept as the closest
+        assert cert["remedy"] == "closest" and tilt > 10.0
+        assert np.linalg.norm(t - pose[:3, 3]) < 0.09
+        return
+    assert cert["remedy"].startswith("shifted") and cert["settled"] and cert["supporters_kept"]
+    assert tilt < 1.0
+    assert out.get("block").world_mesh().bounds[0, 2] == pytest.approx(0.1, abs=0.003)  # flat on the box
+    assert t[0] < 0.05 and np.linalg.norm(t[:2] - pose[:2, 3]) <= max_shift + 1e-6
+
+
+def test_an_object_the_joint_release_toppled_is_grounded_again_on_its_supporter(work):
+    # the box stood on the table; releasing the whole scene left it on its side on the floor beside the table (its
+    # record says so). Grounded again from its input on the table as it rests, it stands flush on the table top
+    # within 1 cm of where it was put, and that pose replaces the toppled one
+    from phiscene.assembly.assemble import _collapsed, _reground_collapsed
+
+    pose = make_pose(translation=(0.1, -0.05, 0.1 + 0.05 + 0.002))
+    scene = scene_of(work, {"table": ("table", TABLE), "box": ("box", pose)})
+    g = graph_of(scene, [("ground", "table", "supports"), ("table", "box", "supports")])
+    params = AssemblyParams.from_dict(FAITHFUL)
+    toppled = make_pose(Rotation.from_euler("y", 90, degrees=True).as_matrix(), (0.5, -0.05, 0.05))
+    objects = {"table": {"joint_settle": [0.0, 0.0]},
+               "box": {"joint_settle": [0.4, 90.0], "certificate": {"remedy": "none", "touching": ["ground"]}}}
+    assert _collapsed(objects["box"], params.faithful) and not _collapsed(objects["table"], params.faithful)
+    poses = _reground_collapsed(scene, g.order, convex_proxies(scene, work["cache"]), params, SIM, work["cache"], g,
+                                {}, {"table": TABLE, "box": toppled}, objects,
+                                {"table": np.zeros(3), "box": np.zeros(3)}, None)
+    R, t, _ = decompose(poses["box"])
+    assert objects["box"]["reground"]["kept"] and objects["box"]["certificate"]["remedy"] == "none+reground"
+    assert min(math.degrees(math.acos(min(1.0, abs(R[2, k])))) for k in range(3)) < 0.5
+    assert np.linalg.norm(t - pose[:3, 3]) < 0.01
+    assert objects["box"]["joint_settle"][0] < 1e-3  # at rest when the scene is released again
+    np.testing.assert_allclose(poses["table"], TABLE, atol=1e-4)
+
+
 @pytest.mark.parametrize("onto_reach", [0.3, 0.0])
 def test_column_balanced_on_an_edge_is_moved_inside_it(work, onto_reach):
     # the 0.3 m column stands on the slab with its centre of mass 4 mm inside the edge (x = 0.15): it settles, but

@@ -258,6 +258,10 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         poses = _joint_settle(_with_attached(scene.with_poses(poses), attached), proxies, sim, cache_dir,
                               params.faithful, params.settle_params, objects, coms,
                               {o: np.asarray(scene.get(o).pose, float) for o in order})
+        if params.faithful.reground and any(_collapsed(objects[o], params.faithful) for o in order
+                                            if o not in attached):
+            poses = _reground_collapsed(scene, order, proxies, params, sim, cache_dir, graph, attached, poses,
+                                        objects, coms, progress)
     if params.faithful.enabled and params.settle and params.faithful.joint_frames > 0:
         _joint_check(_with_attached(scene.with_poses(poses), attached), proxies, sim, cache_dir, params.faithful,
                      objects)
@@ -479,8 +483,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
 
     Every start (the corrected pose, then the nearest resting poses, then a damped run, then the pose moved
     onto the nearest supporting surface, then horizontal shifts when every start so far went farther than
-    ``max_shift`` or lost its supporters) is lowered onto what lies beneath and settled with the paper's
-    settling; the first result within the slide/drop/turn bounds that keeps the graph's supporters is taken,
+    ``max_shift``, lost its supporters or turned past ``max_turn``) is lowered onto what lies beneath and settled
+    with the paper's settling; the first result within the slide/drop/turn bounds that keeps the graph's supporters is taken,
     else, avoiding gross failures (turned past ``max_stable_angle`` or moved past ``onto_reach``) where a start
     did, the closest settled one that stayed in place (on its supporters if one did), else the closest. The
     final pose is always the outcome of free settling.
@@ -540,7 +544,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         stayed = ok and not lost
         # a gross failure: turned beyond any resting pose tried, or went farther than the onto remedy moves
         gross = turned > fp.max_stable_angle or moved > fp.onto_reach
-        out = {"label": label, "result": result, "frames": frames, "gross": gross,
+        out = {"label": label, "result": result, "frames": frames, "gross": gross, "turned": turned,
                "ok": stayed and result.settled and robust and not gave, "lost": bool(lost), "robust": robust,
                "loaded": not gave,
                "stayed": stayed, "in_place": in_place, "travel": moved if not lost else math.inf,
@@ -575,7 +579,10 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
             if onto is not None and onto[1] > 1e-3:
                 attempt(f"onto {onto[1]:.3f} m", onto[0], origin=onto[0])
         travelled = min(t["travel"] for t in tried)
-        if travelled > fp.max_shift and not any(t["ok"] for t in tried):  # every start went far: one nearby
+        # every start went far, or tipped over (a book whose depth error put it over its supporter's edge): one
+        # nearby
+        tipped = min(t["turned"] for t in tried) > fp.max_turn
+        if (travelled > fp.max_shift or tipped) and not any(t["ok"] for t in tried):
             step = fa.slide_bound(info["diag"], fp)
             for r, ring in fa.shifted_starts(pose, step, fp.max_shift, fp.shift_directions):
                 # nearest ring first; stop at an accepted start, or after a ring
@@ -669,6 +676,86 @@ def _joint_settle(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, cac
     log.info("joint settling: %d frames, %s", log_["frames"],
              "all at rest" if log_["all_settled"] else f"not at rest: {', '.join(log_['unsettled'])}")
     return poses
+
+
+def _collapsed(rec: dict, fp: FaithfulParams) -> bool:
+    """Whether joint settling undid an object's placement: it turned past ``max_stable_angle`` (toppled) or moved
+    farther than ``reground_move`` (fell) when the whole scene was released."""
+    moved = rec.get("joint_settle")
+    return moved is not None and (moved[1] > fp.max_stable_angle or moved[0] > fp.reground_move)
+
+
+def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy], params: "AssemblyParams",
+                        sim: SimSettings, cache_dir: Path, graph, attached: dict[str, str],
+                        poses: dict[str, np.ndarray], objects: dict[str, dict], coms: dict[str, np.ndarray],
+                        progress: Callable[[str], None] | None) -> dict[str, np.ndarray]:
+    """Ground again, from its input, each object that joint settling toppled or dropped, against the rest of the
+    scene where joint settling left it; then settle the scene jointly once more.
+
+    Sequential settling tests an object on supporters frozen where they were placed; released together, the
+    supporters may shift under its load (a mug across two boxes that part) and it falls. Its own placement is
+    then redone with the same stages (carried, flush, SDF, guarded settling) on the supporters as they now rest;
+    the new pose replaces the collapsed one when it is closer to the input (:func:`~phiscene.assembly.faithful.
+    closeness`). The record gets ``reground`` (the new attempt's settling record and whether it was kept) and the
+    certificate's remedy a ``+reground``.
+
+    Returns
+    -------
+    The poses (id -> (4, 4)) after the final joint settling (``poses`` when nothing was kept).
+    """
+    from phiscene.inertia import rigid_props
+    from phiscene.sim.bullet import BulletWorld
+
+    fp, pp = params.faithful, params.penetration_params
+    kept = []
+    for oid in [o for o in order if o not in attached and _collapsed(objects[o], fp)]:
+        obj = scene.get(oid)
+        initial = np.asarray(obj.pose, dtype=float)
+        context = {q: poses[q] for q in order if q != oid}
+        rec: dict = {"seconds": {}}
+        with BulletWorld(sim, cache_dir) as world:
+            world.add_ground(scene.ground_height)
+            world.add_structure(scene.structure)
+            for q, p in context.items():
+                mesh_q = scene.get(q).mesh()
+                world.add_body(q, proxies[q].hulls, p, rigid_props(mesh_q, proxies[q].hulls, sim.density,
+                                                                   decompose(p)[2]))
+                world.set_static(q)
+            info = _faithful_info(scene, oid, obj, proxies[oid], graph, context, {}, cache_dir)
+            info["surfaces"] = lambda names, placed=context: _surfaces(scene, placed, names, pp.seed, {})
+            info["fixed"] = set(attached)
+            pose = initial.copy()
+            carrier = next((q for q in info["below"] if q in context), None)
+            if fp.carry and carrier is not None:
+                pose = fa.carried(pose, info["com"], np.asarray(scene.get(carrier).pose, float), context[carrier])
+            if fp.flush and info["flushable"]:
+                pose, info["flush_angle"] = fa.flush_pose(pose, info["normals"], info["com"], info["up"],
+                                                          fp.max_flush_angle)
+            if params.penetration:
+                placed = [sdf_body(q, scene.get(q).mesh(), p, pp.n_context, pp, cache_dir) for q, p in context.items()]
+                planar = _on_the_floor(obj.mesh(), pose, info, scene.ground_height, fp.planar_floor)
+                pose = _resolve(oid, obj.mesh(), pose, placed, scene.ground_height, pp, cache_dir, rec,
+                                scene.structure, planar, yaw_only=bool(info["below"]))
+            new = _settle_faithful(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params, fp, info,
+                                   rec)
+        closer = (fa.closeness(initial, new, info["com"], info["diag"])
+                  < fa.closeness(initial, poses[oid], info["com"], info["diag"]))
+        objects[oid]["reground"] = {"kept": bool(closer), "settled": rec["settled"], "remedy": rec["settle_remedy"],
+                                    "reason": rec.get("reason", ""), "attempts": rec.get("attempts", 0)}
+        if progress is not None:
+            progress(f"{oid}: toppled or fell when the scene was released together; grounded again on its "
+                     f"supporters as they rest ({rec['settle_remedy']}), {'kept' if closer else 'not closer'}")
+        if closer:
+            poses[oid] = new
+            kept.append(oid)
+            cert = objects[oid].get("certificate")
+            if cert is not None:
+                cert["remedy"] = f"{cert['remedy']}+reground"
+                cert["touching"] = rec.get("touching", cert["touching"])
+    if not kept:
+        return poses
+    return _joint_settle(_with_attached(scene.with_poses(poses), attached), proxies, sim, cache_dir, fp,
+                         params.settle_params, objects, coms, {o: np.asarray(scene.get(o).pose, float) for o in order})
 
 
 def _joint_check(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, cache_dir: Path, fp: FaithfulParams,

@@ -41,7 +41,9 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    surface of the objects placed before it within ``onto_reach`` (``onto``,
    :func:`onto_start`: a depth error put it beside the shelf it stands on); when every
    start so far went farther than ``max_shift`` or lost its supporters (a jug
-   whose base straddles a plate's rim tips over and rolls off the table), the
+   whose base straddles a plate's rim tips over and rolls off the table), or
+   turned past ``max_turn`` (a book over its supporter's edge tips onto the floor,
+   its centre of mass barely moving), the
    corrected pose shifted horizontally in ``shift_directions`` directions by
    steps of the slide bound up to ``max_shift`` (``shifted``, nearest first;
    its slide is measured from the shifted start; the first that stays in place
@@ -58,6 +60,9 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
 4. **Joint settling**. The sequentially grounded scene is released as a
    whole until every object is at rest (``joint_settle_frames``): a
    supporter is never tested under the load put on it later in the order.
+   An object that this release toppled or dropped (``reground``) is grounded
+   again from its input on its supporters as they now rest, and the scene is
+   settled jointly once more.
    Objects at rest do not move; the log says how far the others went.
 5. **A certificate** per object in the assembly log (:func:`certificate`), with the result of releasing
    the whole grounded scene at once (``joint_stable``; sequential settling only tests an object against a
@@ -155,7 +160,8 @@ class FaithfulParams(Params):
     retry_rolling_friction
         Rolling and spinning friction of the ``damped`` retry.
     max_shift
-        Remedy ``shifted``: an object whose every start went farther than this (m) or lost its supporters is
+        Remedy ``shifted``: an object whose every start went farther than this (m), lost its supporters or turned
+        past ``max_turn`` is
         restarted from the corrected pose shifted horizontally by multiples of the slide bound up to this
         distance, nearest first (0 = off).
     shift_directions
@@ -165,6 +171,13 @@ class FaithfulParams(Params):
         upward-facing surface of the objects placed before it within this distance (m) of its bottom
         (:func:`onto_start`; 0 = off). A start that had to be lowered farther than this before it touched
         anything fell: it is not in place.
+    reground
+        After joint settling, an object it toppled (turned past ``max_stable_angle``) or dropped (moved farther
+        than ``reground_move``) is grounded again from its input against the rest of the scene as it then rests, and
+        the scene settled jointly once more (:func:`~phiscene.assembly.assemble.ground_scene`): its supporters,
+        loaded together, may have shifted under it.
+    reground_move
+        Displacement (m) in joint settling past which an object is grounded again.
     """
 
     _label = "faithful parameters"
@@ -193,13 +206,15 @@ class FaithfulParams(Params):
     max_shift: float = 0.09
     shift_directions: int = 6
     onto_reach: float = 0.3
+    reground: bool = True
+    reground_move: float = 0.09
 
     def check(self) -> None:
         """Reject negative bounds and ``retry_damping`` outside [0, 1) (``ValueError``)."""
         for key in ("max_flush_angle", "max_stable_angle", "max_candidates", "tilt_test", "tilt_frames",
                     "joint_settle_frames", "joint_frames", "joint_tol", "joint_tol_deg", "max_slide",
                     "max_slide_frac", "max_turn", "contact_tol", "retry_rolling_friction", "max_shift",
-                    "shift_directions", "onto_reach", "planar_floor", "load_frames"):
+                    "shift_directions", "onto_reach", "planar_floor", "load_frames", "reground_move"):
             if getattr(self, key) < 0:
                 raise ValueError(f"faithful parameter {key!r} must be >= 0, got {getattr(self, key)}")
         if self.load_depth < 1:
