@@ -579,9 +579,9 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
             if onto is not None and onto[1] > 1e-3:
                 attempt(f"onto {onto[1]:.3f} m", onto[0], origin=onto[0])
         travelled = min(t["travel"] for t in tried)
-        # every start went far, or tipped over (a book whose depth error put it over its supporter's edge): one
-        # nearby
-        tipped = min(t["turned"] for t in tried) > fp.max_turn
+        # every start went far, or none came to rest level (tipped over, or still moving: a book whose depth error
+        # put it over its supporter's edge): one nearby
+        tipped = all(t["turned"] > fp.max_turn or not t["result"].settled for t in tried)
         if (travelled > fp.max_shift or tipped) and not any(t["ok"] for t in tried):
             step = fa.slide_bound(info["diag"], fp)
             for r, ring in fa.shifted_starts(pose, step, fp.max_shift, fp.shift_directions):
