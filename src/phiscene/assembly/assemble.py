@@ -482,8 +482,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
     """Guarded settling (see :mod:`phiscene.assembly.faithful`); fills ``rec``; returns the frozen pose.
 
     Every start (the corrected pose, then the nearest resting poses, then a damped run, then the pose moved onto the
-    nearest supporting surface, then horizontal shifts when every start so far went farther than ``max_shift``, lost
-    its supporters or turned past ``max_turn``) is lowered onto what lies beneath and settled with the paper's
+    nearest supporting surface, then horizontal shifts when every start so far went farther than ``max_shift`` or
+    lost its supporters, or none came to rest level) is lowered onto what lies beneath and settled with the paper's
     settling; the first result within the slide/drop/turn bounds that keeps the graph's supporters is taken, else,
     avoiding gross failures (turned past ``max_stable_angle`` or moved past ``onto_reach``) where a start did, the
     closest settled one that stayed in place (on its supporters if one did), else the closest. The final pose is

@@ -42,8 +42,9 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    :func:`onto_start`: a depth error put it beside the shelf it stands on); when every
    start so far went farther than ``max_shift`` or lost its supporters (a jug
    whose base straddles a plate's rim tips over and rolls off the table), or
-   turned past ``max_turn`` (a book over its supporter's edge tips onto the floor,
-   its centre of mass barely moving), the
+   none came to rest level (each turned past ``max_turn`` or was still moving: a
+   book over its supporter's edge tips onto the floor, its centre of mass barely
+   moving), the
    corrected pose shifted horizontally in ``shift_directions`` directions by
    steps of the slide bound up to ``max_shift`` (``shifted``, nearest first;
    its slide is measured from the shifted start; the first that stays in place
@@ -160,10 +161,10 @@ class FaithfulParams(Params):
     retry_rolling_friction
         Rolling and spinning friction of the ``damped`` retry.
     max_shift
-        Remedy ``shifted``: an object whose every start went farther than this (m), lost its supporters or turned
-        past ``max_turn`` is
-        restarted from the corrected pose shifted horizontally by multiples of the slide bound up to this
-        distance, nearest first (0 = off).
+        Remedy ``shifted``: an object whose every start went farther than this (m) or lost its supporters, or none
+        of whose starts came to rest level (turned past ``max_turn`` or still moving), is restarted from the
+        corrected pose shifted horizontally by multiples of the slide bound up to this distance, nearest first
+        (0 = off).
     shift_directions
         Directions per shift distance (evenly spaced, the first along +x).
     onto_reach
