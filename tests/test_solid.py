@@ -137,3 +137,33 @@ def test_cavity_share_of_a_double_wall_is_the_ball_inside_its_inner_wall():
     lo, hi = ((0.096 - 1.5 * h) / (0.1 + 0.5 * h)) ** 3, (0.096 / 0.1) ** 3
     assert lo <= share <= hi
     assert cavity_share(trimesh.creation.icosphere(4, 0.1), params) == 0.0  # a solid ball: no cavity
+
+
+def test_inner_face_masks_are_kept_on_disk_and_a_bad_file_is_recomputed(tmp_path, monkeypatch):
+    import phiscene.solid as solid
+
+    mesh, _ = double_wall(wall=0.005)
+    expected = inner_faces(mesh)
+    assert expected.any()
+    solid.use_disk_cache(tmp_path)
+    try:
+        solid._CACHE.clear()
+        first = outer_shell(mesh)
+        files = list((tmp_path / "shells").glob("*.npy"))
+        assert len(files) == 1
+        np.testing.assert_array_equal(np.asarray(first.faces), np.asarray(mesh.faces)[~expected])
+
+        # a fresh process (memory cache empty) reads the mask instead of classifying again
+        solid._CACHE.clear()
+        monkeypatch.setattr(solid, "inner_faces", lambda *a, **k: pytest.fail("classified again"))
+        np.testing.assert_array_equal(np.asarray(outer_shell(mesh).faces), np.asarray(first.faces))
+
+        # a truncated file is not this mesh's: recomputed and rewritten
+        monkeypatch.undo()
+        files[0].write_bytes(files[0].read_bytes()[:-8])
+        solid._CACHE.clear()
+        np.testing.assert_array_equal(np.asarray(outer_shell(mesh).faces), np.asarray(first.faces))
+        assert solid._read_mask(files[0], len(mesh.faces)) is not None
+    finally:
+        solid.use_disk_cache(None)
+        solid._CACHE.clear()

@@ -15,12 +15,14 @@ from phiscene.atomic import write_json
 from phiscene.proxies import ProxyParams, proxy_for_mesh, read_proxies, write_proxies
 from phiscene.scene import load_scene, save_scene
 from phiscene.sim.settings import SimSettings
+from phiscene.solid import use_disk_cache
 
 log = logging.getLogger(__name__)
 
 
 def run_proxies(scene_path: str | Path, out_path: str | Path, params: dict, cache_dir: str | Path) -> None:
     """Convex proxies of every object of a scene -> one ``.npz`` keyed by object id."""
+    use_disk_cache(cache_dir)
     scene = load_scene(scene_path)
     pp = ProxyParams.from_dict(params)
     proxies = {}
@@ -56,6 +58,7 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
     from phiscene.assembly.assemble import AssemblyParams, ground_scene
     from phiscene.topology.attached import attached_ids
 
+    use_disk_cache(cache_dir)
     scene = load_scene(scene_path)
     graph = topology.load(topology_path, scene_ids=scene.ids)
     proxies = read_proxies(proxies_path)
@@ -135,6 +138,7 @@ def run_metrics(tasks: list[dict], settings: dict, proxies_path: str | Path | No
     """
     from phiscene.metrics.evaluate import MetricInputs, MetricTask, methods_metrics
 
+    use_disk_cache(cache_dir)
     inputs = MetricInputs(proxies=proxies_path, gt=gt_path, initial=initial_path, reference_dir=reference_dir,
                           cache_dir=cache_dir)
     todo = [MetricTask(t["method"], t["scene"], t["out"], tuple(t["sections"]), t.get("proxies"), t.get("align", False))

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import trimesh
@@ -252,12 +253,55 @@ def inner_faces(mesh: trimesh.Trimesh, params: ShellParams = ShellParams()) -> n
 #: Per-process cache of outer shells by mesh content hash (least recently used evicted).
 _CACHE: "OrderedDict[str, trimesh.Trimesh]" = OrderedDict()
 _CACHE_SIZE = 256
+#: Folder of the on-disk cache of inner-face masks (:func:`use_disk_cache`); ``None``: memory only.
+_DISK: Path | None = None
+
+
+def use_disk_cache(cache_dir: str | Path | None) -> None:
+    """Keep the inner-face masks :func:`outer_shell` computes in ``<cache_dir>/shells`` too (``None``: memory only).
+
+    Classifying a 30,000-face reconstruction takes about 0.1 s; every workflow job that tests insides or measures
+    penetration on the same meshes (topology, grounding, metrics) would redo it. The stage functions of
+    :mod:`phiscene.pipeline` that take a cache folder set it.
+    """
+    global _DISK
+    _DISK = None if cache_dir is None else Path(cache_dir) / "shells"
+
+
+def _read_mask(path: Path, n_faces: int) -> np.ndarray | None:
+    """The cached inner-face mask (n_faces,) bool at ``path``, or ``None`` when absent, unreadable or not this
+    mesh's (another face count)."""
+    try:
+        packed = np.load(path)
+    except (OSError, ValueError):
+        return None
+    if packed.dtype != np.uint8 or packed.shape != ((n_faces + 7) // 8,):
+        return None
+    return np.unpackbits(packed, count=n_faces).astype(bool)
+
+
+def _inner_mask(mesh: trimesh.Trimesh, params: "ShellParams", key: str) -> np.ndarray:
+    """:func:`inner_faces` of ``mesh``, through the disk cache when one is set (:func:`use_disk_cache`)."""
+    from phiscene.atomic import atomic_path
+
+    n = len(mesh.faces)
+    path = None if _DISK is None else _DISK / f"{key}.npy"
+    if path is not None and path.exists():
+        got = _read_mask(path, n)
+        if got is not None:
+            return got
+    inner = inner_faces(mesh, params) if n >= 4 else np.zeros(n, dtype=bool)
+    if path is not None:
+        with atomic_path(path) as tmp:
+            np.save(tmp, np.packbits(inner))
+    return inner
 
 
 def outer_shell(mesh: trimesh.Trimesh, params: ShellParams = ShellParams()) -> trimesh.Trimesh:
     """``mesh`` without the faces that face a sealed cavity (``mesh`` itself when there are none).
 
-    Cached per process by mesh content and parameters; the result is shared: copy it before changing it.
+    Cached per process by mesh content and parameters (the result is shared: copy it before changing it), and the
+    inner-face mask on disk where :func:`use_disk_cache` set a folder.
 
     Parameters
     ----------
@@ -276,7 +320,7 @@ def outer_shell(mesh: trimesh.Trimesh, params: ShellParams = ShellParams()) -> t
     if got is not None:
         _CACHE.move_to_end(key)
         return got
-    inner = inner_faces(mesh, params) if len(mesh.faces) >= 4 else np.zeros(len(mesh.faces), dtype=bool)
+    inner = _inner_mask(mesh, params, key)
     if inner.any():
         got = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces)[~inner], process=False)
         got.remove_unreferenced_vertices()
