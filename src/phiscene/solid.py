@@ -286,10 +286,9 @@ def _inner_mask(mesh: trimesh.Trimesh, params: "ShellParams", key: str) -> np.nd
 
     n = len(mesh.faces)
     path = None if _DISK is None else _DISK / f"{key}.npy"
-    if path is not None and path.exists():
-        got = _read_mask(path, n)
-        if got is not None:
-            return got
+    got = None if path is None else _read_mask(path, n)
+    if got is not None:
+        return got
     inner = inner_faces(mesh, params) if n >= 4 else np.zeros(n, dtype=bool)
     if path is not None:
         with atomic_path(path) as tmp:

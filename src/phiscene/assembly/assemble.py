@@ -201,17 +201,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             info = None
             if fp.enabled:
                 t0 = time.perf_counter()
-                info = _faithful_info(scene, oid, obj, proxies.get(oid), graph, poses, world_meshes, cache_dir)
-                info["surfaces"] = lambda names: _surfaces(scene, poses, names, pp.seed, surfaces)
-                info["fixed"] = set(attached)  # static for good: never released under a load
-                carrier = next((q for q in info["below"] if q in poses), None)
-                if fp.carry and carrier is not None:
-                    pose = fa.carried(pose, info["com"], np.asarray(scene.get(carrier).pose, float), poses[carrier])
-                    rec["carried_by"] = carrier
-                if fp.flush and info["flushable"]:
-                    pose, info["flush_angle"] = fa.flush_pose(pose, info["normals"], info["com"],
-                                                              info["up"], fp.max_flush_angle)
-                rec["flush_angle"] = _round(info["flush_angle"])
+                pose, info = _faithful_start(scene, oid, proxies.get(oid), graph, poses, world_meshes, surfaces,
+                                             attached, fp, pp.seed, cache_dir, rec)
                 rec["seconds"]["flush"] = time.perf_counter() - t0
 
             t0 = time.perf_counter()
@@ -258,8 +249,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         poses = _joint_settle(_with_attached(scene.with_poses(poses), attached), proxies, sim, cache_dir,
                               params.faithful, params.settle_params, objects, coms,
                               {o: np.asarray(scene.get(o).pose, float) for o in order})
-        if params.faithful.reground and any(_collapsed(objects[o], params.faithful) for o in order
-                                            if o not in attached):
+        if params.faithful.reground:
             poses = _reground_collapsed(scene, order, proxies, params, sim, cache_dir, graph, attached, poses,
                                         objects, coms, progress)
     if params.faithful.enabled and params.settle and params.faithful.joint_frames > 0:
@@ -319,13 +309,41 @@ def _flushed_on(plane, obj, proxy: Proxy | None, pose: np.ndarray, max_angle_deg
     return out
 
 
-def _fix(world, oid: str, mesh, proxy: Proxy | None, pose: np.ndarray, sim: SimSettings, rec: dict) -> None:
-    """An attached object: a static collider at ``pose`` (when settling); fills ``rec``."""
+def _faithful_start(scene: Scene, oid: str, proxy: Proxy | None, graph, poses: dict[str, np.ndarray],
+                    world_meshes: dict[str, object], surfaces: dict[str, np.ndarray], attached: dict[str, str],
+                    fp: FaithfulParams, seed: int, cache_dir: Path, rec: dict) -> tuple[np.ndarray, dict]:
+    """The faithful variant's start for ``oid`` among the placed objects ``poses`` (id -> (4, 4)): its input pose
+    carried with its supporter and turned flush onto it, and what the later stages need
+    (:func:`_faithful_info`, with ``surfaces`` and ``fixed``). ``world_meshes`` and ``surfaces`` are per-id caches
+    shared between calls on the same placed poses. Fills ``rec`` (``carried_by``, ``flush_angle``)."""
+    obj = scene.get(oid)
+    pose = np.asarray(obj.pose, dtype=float).copy()
+    info = _faithful_info(scene, oid, obj, proxy, graph, poses, world_meshes, cache_dir)
+    info["surfaces"] = lambda names: _surfaces(scene, poses, names, seed, surfaces)
+    info["fixed"] = set(attached)  # static for good: never released under a load
+    carrier = next((q for q in info["below"] if q in poses), None)
+    if fp.carry and carrier is not None:
+        pose = fa.carried(pose, info["com"], np.asarray(scene.get(carrier).pose, float), poses[carrier])
+        rec["carried_by"] = carrier
+    if fp.flush and info["flushable"]:
+        pose, info["flush_angle"] = fa.flush_pose(pose, info["normals"], info["com"], info["up"],
+                                                  fp.max_flush_angle)
+    rec["flush_angle"] = _round(info["flush_angle"])
+    return pose, info
+
+
+def _add_static(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: SimSettings) -> None:
+    """``oid`` as a static collider at ``pose`` in ``world`` (its mass properties kept for a later release)."""
     from phiscene.inertia import rigid_props
 
+    world.add_body(oid, proxy.hulls, pose, rigid_props(mesh, proxy.hulls, sim.density, decompose(pose)[2]))
+    world.set_static(oid)
+
+
+def _fix(world, oid: str, mesh, proxy: Proxy | None, pose: np.ndarray, sim: SimSettings, rec: dict) -> None:
+    """An attached object: a static collider at ``pose`` (when settling); fills ``rec``."""
     if world is not None:
-        world.add_body(oid, proxy.hulls, pose, rigid_props(mesh, proxy.hulls, sim.density, decompose(pose)[2]))
-        world.set_static(oid)
+        _add_static(world, oid, mesh, proxy, pose, sim)
     rec.update(sdf_iterations=0, sdf_initial_loss=None, sdf_final_loss=None, sdf_translation=[0.0, 0.0, 0.0],
                sdf_context=[], sdf_grid_error=None, settle_frames=0, settled=True, settle_remedy="attached",
                residual_translation=0.0, residual_rotation=0.0, settle_translation=0.0, settle_rotation=0.0)
@@ -703,7 +721,6 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
     -------
     The poses (id -> (4, 4)) after the final joint settling (``poses`` when nothing was kept).
     """
-    from phiscene.inertia import rigid_props
     from phiscene.sim.bullet import BulletWorld
 
     fp, pp = params.faithful, params.penetration_params
@@ -717,20 +734,9 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
             world.add_ground(scene.ground_height)
             world.add_structure(scene.structure)
             for q, p in context.items():
-                mesh_q = scene.get(q).mesh()
-                world.add_body(q, proxies[q].hulls, p, rigid_props(mesh_q, proxies[q].hulls, sim.density,
-                                                                   decompose(p)[2]))
-                world.set_static(q)
-            info = _faithful_info(scene, oid, obj, proxies[oid], graph, context, {}, cache_dir)
-            info["surfaces"] = lambda names, placed=context: _surfaces(scene, placed, names, pp.seed, {})
-            info["fixed"] = set(attached)
-            pose = initial.copy()
-            carrier = next((q for q in info["below"] if q in context), None)
-            if fp.carry and carrier is not None:
-                pose = fa.carried(pose, info["com"], np.asarray(scene.get(carrier).pose, float), context[carrier])
-            if fp.flush and info["flushable"]:
-                pose, info["flush_angle"] = fa.flush_pose(pose, info["normals"], info["com"], info["up"],
-                                                          fp.max_flush_angle)
+                _add_static(world, q, scene.get(q).mesh(), proxies[q], p, sim)
+            pose, info = _faithful_start(scene, oid, proxies[oid], graph, context, {}, {}, attached, fp, pp.seed,
+                                         cache_dir, rec)
             if params.penetration:
                 placed = [sdf_body(q, scene.get(q).mesh(), p, pp.n_context, pp, cache_dir) for q, p in context.items()]
                 planar = _on_the_floor(obj.mesh(), pose, info, scene.ground_height, fp.planar_floor)
