@@ -21,7 +21,7 @@ def resimulate(scene: Scene, cache: Path, proxies: ProxyParams, seconds: float =
         world.add_ground(scene.ground_height)
         for o in scene.objects:
             hulls = proxy_for_mesh(o.mesh_path, proxies, cache).hulls
-            world.add_body(o.id, hulls, o.pose, rigid_props(o.mesh(), hulls, s.density))
+            world.add_body(o.id, hulls, o.pose, rigid_props(o.mesh(), hulls, s.density, com=o.com))
         world.step_frames(int(round(seconds / s.frame_dt)))
         dt, dr = 0.0, 0.0
         for o in scene.objects:

@@ -26,7 +26,8 @@ class RigidProps:
     principal_axes : (3, 3) float
         Rotation whose columns are the principal axes in the local frame.
     source : str
-        ``"mesh"`` (closed mesh) or ``"proxies"`` (union of convex hulls).
+        ``"mesh"`` (closed mesh), ``"proxies"`` (union of convex hulls) or ``"hull"``; with
+        ``", declared centre of mass"`` appended when one was given.
     """
 
     mass: float
@@ -37,11 +38,14 @@ class RigidProps:
 
 
 def rigid_props(mesh: trimesh.Trimesh, hulls: list[np.ndarray] | None, density: float,
-                scale: float = 1.0) -> RigidProps:
+                scale: float = 1.0, com: np.ndarray | None = None) -> RigidProps:
     """Mass, centre of mass and inertia of an object.
 
     A closed (watertight, positive-volume) mesh is integrated exactly; an open
     or multi-shell one falls back to the union of its convex proxies.
+    A declared centre of mass (:attr:`phiscene.scene.SceneObject.com`) keeps the mass and moves the centre there;
+    the inertia is the uniform solid's about that point (parallel-axis theorem), the inertia of a body whose
+    extra mass sits near it.
 
     Parameters
     ----------
@@ -53,6 +57,8 @@ def rigid_props(mesh: trimesh.Trimesh, hulls: list[np.ndarray] | None, density: 
         kg/m^3.
     scale
         Uniform scale of the pose.
+    com : (3,) float, optional
+        Declared centre of mass, local frame (unscaled); ``None``: the uniform solid's.
     """
     body = None
     source = "mesh"
@@ -71,9 +77,15 @@ def rigid_props(mesh: trimesh.Trimesh, hulls: list[np.ndarray] | None, density: 
     if not np.isfinite(volume) or volume <= TOL.min_volume * scale**3:
         raise InputError(None, None, f"object has no usable volume ({volume:.3g} m^3) for mass properties")
     inertia = np.asarray(m.moment_inertia)
+    centre = np.asarray(m.center_mass, dtype=float)
+    if com is not None:
+        d = np.asarray(com, dtype=float) * scale - centre
+        inertia = inertia + float(m.mass) * (float(d @ d) * np.eye(3) - np.outer(d, d))
+        centre = centre + d
+        source = f"{source}, declared centre of mass"
     moments, axes = np.linalg.eigh(0.5 * (inertia + inertia.T))
     if np.linalg.det(axes) < 0:
         axes[:, 0] *= -1
     moments = np.maximum(moments, 1e-12)
-    return RigidProps(mass=float(m.mass), com=np.asarray(m.center_mass, dtype=float), principal_moments=moments,
+    return RigidProps(mass=float(m.mass), com=centre, principal_moments=moments,
                       principal_axes=axes, source=source)

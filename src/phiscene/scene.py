@@ -47,6 +47,11 @@ class SceneObject:
         ``None`` for a free rigid body; otherwise the id of what holds it in place (a :class:`Plane` of
         :attr:`Scene.structure`, e.g. ``wall_0``, or ``ground``): the object is static, kept where it is (never
         dropped or settled), a collider for the others, and left out of drift averages.
+    com : (3,) float or None
+        Declared centre of mass in the local (unscaled) mesh frame; ``None``: that of a uniform solid
+        (:func:`phiscene.inertia.rigid_props`). Grounding declares one for an object at rest in the input that
+        topples as a uniform solid (a vase whose flowers outweigh its base; remedy ``ballast`` of
+        :mod:`phiscene.assembly.faithful`); every simulator, metric and export uses it.
     """
 
     id: str
@@ -56,6 +61,7 @@ class SceneObject:
     color: tuple[int, int, int] | None = None
     meta: dict = field(default_factory=dict)
     attached: str | None = None
+    com: np.ndarray | None = None
 
     def mesh(self):
         """The local-frame mesh, loaded once per path (see :func:`phiscene.meshes.load_mesh`)."""
@@ -216,6 +222,8 @@ def scene_to_dict(scene: Scene, json_dir: Path) -> dict:
             d["meta"] = o.meta
         if o.attached is not None:
             d["attached"] = o.attached
+        if o.com is not None:
+            d["com"] = [float(v) for v in np.asarray(o.com, dtype=float).round(12)]
         objs.append(d)
     out = {"format": FORMAT, "units": "m", "up": [0, 0, 1], "ground": {"height": float(scene.ground_height)},
            "objects": objs}
@@ -289,8 +297,11 @@ def load_scene(path: str | Path, check_meshes: bool = True) -> Scene:
         if not mesh_path.is_file():
             raise InputError(path, f"{where}.mesh", f"mesh file not found: {d['mesh']}")
         color = tuple(d["color"]) if "color" in d else None
+        com = np.asarray(d["com"], dtype=float) if "com" in d else None
+        if com is not None and not np.isfinite(com).all():
+            raise InputError(path, f"{where}.com", f"must be finite, got {d['com']}")
         objects.append(SceneObject(id=d["id"], mesh_path=mesh_path, pose=pose, description=d.get("description", ""),
-                                   color=color, meta=d.get("meta", {}), attached=d.get("attached")))
+                                   color=color, meta=d.get("meta", {}), attached=d.get("attached"), com=com))
     structure = _load_structure(path, data.get("structure", []), seen)
     holders = {"ground"} | {p.id for p in structure}
     for i, o in enumerate(objects):

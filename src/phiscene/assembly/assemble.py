@@ -43,6 +43,8 @@ log = logging.getLogger(__name__)
 
 #: Format tag of the assembly log.
 LOG_FORMAT = "phiscene.assembly_log/1"
+#: When no start is accepted, at most this many fallback results are tilt-tested, in rank order, for one that holds.
+FALLBACK_TILTS = 4
 
 
 @dataclass(frozen=True)
@@ -169,6 +171,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     placed: list[SdfBody] = []
     objects: dict[str, dict] = {}
     coms: dict[str, np.ndarray] = {}  # faithful: centre of mass per object, local frame
+    # declared centres of mass (the input's, and the remedy ballast's), local frame
+    masses: dict[str, np.ndarray] = {o.id: np.asarray(o.com, dtype=float) for o in scene.objects if o.com is not None}
     surfaces: dict[str, np.ndarray] = {}  # faithful: upward surface samples per placed object (remedy onto)
     world_meshes: dict[str, object] = {}  # faithful: placed supporters' meshes at their grounded poses
     world_cm = BulletWorld(sim, cache_dir) if params.settle else contextlib.nullcontext()
@@ -186,7 +190,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                 if params.faithful.enabled and params.faithful.flush:
                     pose = _flush_attached(scene, oid, obj, proxies.get(oid), attached[oid],
                                            params.faithful.max_flush_angle, cache_dir, rec)
-                _fix(world if params.settle else None, oid, obj.mesh(), proxies.get(oid), pose, sim, rec)
+                _fix(world if params.settle else None, oid, obj.mesh(), proxies.get(oid), pose, sim, rec,
+                     masses.get(oid))
                 total, turned = window_motion(initial, pose)
                 rec.update(displacement=_round(total), rotation_change=_round(turned))
                 poses[oid] = pose
@@ -219,9 +224,12 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             t0 = time.perf_counter()
             if params.settle and info is not None:
                 pose = _settle_faithful(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params,
-                                        fp, info, rec)
+                                        fp, info, rec, masses.get(oid))
+                if "ballast" in rec:
+                    masses[oid] = np.asarray(rec["ballast"]["com"], dtype=float)
             elif params.settle:
-                pose = _settle(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params, rec)
+                pose = _settle(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params, rec,
+                               masses.get(oid))
             else:
                 rec.update(settle_frames=0, settled=None, settle_remedy=None, residual_translation=None,
                            residual_rotation=None, settle_translation=0.0, settle_rotation=0.0)
@@ -246,15 +254,15 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             if progress is not None:
                 progress(_progress_line(index, len(order), oid, rec))
     if params.faithful.enabled and params.settle and params.faithful.joint_settle_frames > 0:
-        poses = _joint_settle(_with_attached(scene.with_poses(poses), attached), proxies, sim, cache_dir,
+        poses = _joint_settle(_with_attached(scene.with_poses(poses), attached, masses), proxies, sim, cache_dir,
                               params.faithful, params.settle_params, objects, coms,
                               {o: np.asarray(scene.get(o).pose, float) for o in order})
         if params.faithful.reground:
             poses = _reground_collapsed(scene, order, proxies, params, sim, cache_dir, graph, attached, poses,
-                                        objects, coms, progress)
+                                        objects, coms, masses, progress)
     if params.faithful.enabled and params.settle and params.faithful.joint_frames > 0:
-        _joint_check(_with_attached(scene.with_poses(poses), attached), proxies, sim, cache_dir, params.faithful,
-                     objects)
+        _joint_check(_with_attached(scene.with_poses(poses), attached, masses), proxies, sim, cache_dir,
+                     params.faithful, objects)
     unsettled = [o for o, r in objects.items() if r["settled"] is False]
     summary = {"objects": len(order), "settled": sum(r["settled"] is True for r in objects.values()),
                "unsettled": unsettled,
@@ -271,7 +279,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     summary["attached"] = sorted(attached)
     record = {"format": LOG_FORMAT, "order": order, "appended": appended, "params": params.to_dict(),
               "sim": sim.to_dict(), "objects": objects, "summary": summary}
-    return _with_attached(scene.with_poses(poses), attached), record
+    return _with_attached(scene.with_poses(poses), attached, masses), record
 
 
 def _flush_attached(scene: Scene, oid: str, obj, proxy: Proxy | None, holder: str, max_angle_deg: float,
@@ -332,18 +340,21 @@ def _faithful_start(scene: Scene, oid: str, proxy: Proxy | None, graph, poses: d
     return pose, info
 
 
-def _add_static(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: SimSettings) -> None:
-    """``oid`` as a static collider at ``pose`` in ``world`` (its mass properties kept for a later release)."""
+def _add_static(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: SimSettings,
+                com: np.ndarray | None = None) -> None:
+    """``oid`` as a static collider at ``pose`` in ``world`` (its mass properties, with its declared centre of
+    mass ``com`` (3,) local when it has one, kept for a later release)."""
     from phiscene.inertia import rigid_props
 
-    world.add_body(oid, proxy.hulls, pose, rigid_props(mesh, proxy.hulls, sim.density, decompose(pose)[2]))
+    world.add_body(oid, proxy.hulls, pose, rigid_props(mesh, proxy.hulls, sim.density, decompose(pose)[2], com))
     world.set_static(oid)
 
 
-def _fix(world, oid: str, mesh, proxy: Proxy | None, pose: np.ndarray, sim: SimSettings, rec: dict) -> None:
+def _fix(world, oid: str, mesh, proxy: Proxy | None, pose: np.ndarray, sim: SimSettings, rec: dict,
+         com: np.ndarray | None = None) -> None:
     """An attached object: a static collider at ``pose`` (when settling); fills ``rec``."""
     if world is not None:
-        _add_static(world, oid, mesh, proxy, pose, sim)
+        _add_static(world, oid, mesh, proxy, pose, sim, com)
     rec.update(sdf_iterations=0, sdf_initial_loss=None, sdf_final_loss=None, sdf_translation=[0.0, 0.0, 0.0],
                sdf_context=[], sdf_grid_error=None, settle_frames=0, settled=True, settle_remedy="attached",
                residual_translation=0.0, residual_rotation=0.0, settle_translation=0.0, settle_rotation=0.0)
@@ -392,11 +403,12 @@ def _on_the_floor(mesh, pose: np.ndarray, info: dict, ground_height: float, reac
 
 
 def _settle(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: SimSettings, sp: SettleParams,
-            rec: dict) -> np.ndarray:
-    """Settling stage: add ``oid`` dynamic at ``pose``, settle it, freeze it; fills ``rec``; returns its pose."""
+            rec: dict, com: np.ndarray | None = None) -> np.ndarray:
+    """Settling stage: add ``oid`` dynamic at ``pose`` (with its declared centre of mass ``com`` (3,) local, if
+    any), settle it, freeze it; fills ``rec``; returns its pose."""
     from phiscene.inertia import rigid_props
 
-    props = rigid_props(mesh, proxy.hulls, sim.density, decompose(pose)[2])
+    props = rigid_props(mesh, proxy.hulls, sim.density, decompose(pose)[2], com)
     world.add_body(oid, proxy.hulls, pose, props)
     result = settle_object(world, oid, sp)
     world.set_static(oid)
@@ -496,7 +508,7 @@ def _surfaces(scene: Scene, poses: dict[str, np.ndarray], names: list[str], seed
 
 
 def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: SimSettings, sp: SettleParams,
-                     fp: FaithfulParams, info: dict, rec: dict) -> np.ndarray:
+                     fp: FaithfulParams, info: dict, rec: dict, com: np.ndarray | None = None) -> np.ndarray:
     """Guarded settling (see :mod:`phiscene.assembly.faithful`); fills ``rec``; returns the frozen pose.
 
     Every start (the corrected pose, then the nearest resting poses, then a damped run, then the pose moved onto the
@@ -506,10 +518,15 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
     avoiding gross failures (turned past ``max_stable_angle`` or moved past ``onto_reach``) where a start did, the
     closest settled one that stayed in place (on its supporters if one did), else the closest. The final pose is
     always the outcome of free settling.
+
+    The body has the declared centre of mass ``com`` (3,) local, if any. When no start came to rest level, one
+    more start from the corrected pose with its centre of mass declared lower (remedy ``ballast``,
+    :func:`~phiscene.assembly.faithful.ballast_com`) comes before the shifted ones; accepted, ``rec`` gets
+    ``ballast`` (``com``: the declared centre, local; ``lowered``: m), else the body is a uniform solid again.
     """
     from phiscene.inertia import rigid_props
 
-    props = rigid_props(mesh, proxy.hulls, sim.density, decompose(pose)[2])
+    props = rigid_props(mesh, proxy.hulls, sim.density, decompose(pose)[2], com)
     world.add_body(oid, proxy.hulls, pose, props)
     context = [b for b in world.bodies if b != oid]
 
@@ -517,6 +534,14 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         return sorted(world.distances(oid, context, fp.contact_tol))
 
     tried: list[dict] = []
+    scale = decompose(pose)[2]
+    body = {"com": com}  # the centre of mass the body in the world has (declared, local; None: uniform)
+
+    def mass(declared: np.ndarray | None) -> None:  # the body again, with another centre of mass
+        if declared is not body["com"]:
+            world.remove_body(oid)
+            world.add_body(oid, proxy.hulls, pose, rigid_props(mesh, proxy.hulls, sim.density, scale, declared))
+            body["com"] = declared
 
     def attempt(label: str, start: np.ndarray, damped: bool = False, origin: np.ndarray | None = None) -> dict:
         # origin: where the slide bound is measured from (a shifted start: the start itself)
@@ -545,8 +570,9 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         # in place: within the bounds, still leaning where it leans (the graph may name the wrong supporter
         # from below: an object that rests where it was put, on something else, is in place all the same)
         in_place = ok and not any(p in lost for p in info["leaning"])
-        robust = True  # tested only where it decides: a settled result in place
-        if result.settled and in_place and fp.tilt_test > 0 and not info["leaning"]:  # leaning: friction
+        robust = True  # tested only where it decides: a settled result in place (the fallback: below)
+        tested = result.settled and in_place and fp.tilt_test > 0 and not info["leaning"]  # leaning: friction
+        if tested:
             robust = holds_when_tilted(world, oid, fp.tilt_test, fp.tilt_frames, fp.joint_tol, fp.joint_tol_deg)
             frames += 4 * fp.tilt_frames
         gave: list[str] = []  # the placed objects it touches (and their supporters), released under it, hold it
@@ -567,7 +593,9 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                "loaded": not gave,
                "stayed": stayed, "in_place": in_place, "travel": moved if not lost else math.inf,
                "cost": fa.closeness(pose, result.pose, info["com"], info["diag"], start=lowered) + fell,
-               "why": "; ".join(w for w in whys if w), "touching": near}
+               "why": "; ".join(w for w in whys if w), "touching": near, "com": body["com"]}
+        if tested:
+            out["tilt_tested"] = True
         tried.append(out)
         return out
 
@@ -596,6 +624,23 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                                  fp.contact_tol / 2, info["walls"])
             if onto is not None and onto[1] > 1e-3:
                 attempt(f"onto {onto[1]:.3f} m", onto[0], origin=onto[0])
+        if fp.ballast and not any(t["ok"] for t in tried) and all(
+                t["turned"] > fp.max_turn or not t["result"].settled or not t["robust"] for t in tried):
+            # none came to rest level: at rest in the photo, so not a uniform solid (flowers outweighing a vase)
+            points = np.vstack(proxy.hulls)
+            declared = fa.ballast_com(pose, props.com / scale, points, fp.ballast_height)
+            start = pose
+            if declared is not None and fp.flush and info["flushable"]:
+                # flush on the facet it rests on with that centre of mass (a vase's base is no resting facet of
+                # the uniform solid), then the centre over that base
+                start, angle = fa.flush_pose(pose, fa.resting_normals(points, declared), declared, info["up"],
+                                             fp.max_flush_angle)
+                if angle > 0:
+                    declared = fa.ballast_com(start, props.com / scale, points, fp.ballast_height)
+            if declared is not None:
+                mass(declared)
+                if not attempt("ballast", start, origin=start)["ok"]:  # the flush is a correction, as for none
+                    mass(com)  # the other starts as it came; the ballast result may still be the closest
         travelled = min(t["travel"] for t in tried)
         # every start went far, or none came to rest level (tipped over, or still moving: a book whose depth error
         # put it over its supporter's edge): one nearby
@@ -612,8 +657,25 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
     # one, even one still moving when the settling window closed; then a settled result, then one that stayed in
     # place, then one on its supporters, then one that holds when tilted, then one its carriers hold, then the
     # closest to the corrected input
-    best = ok[0] if ok else min(tried, key=lambda t: (t["gross"], not t["result"].settled, not t["in_place"],
-                                                      not t["stayed"], not t["robust"], not t["loaded"], t["cost"]))
+    def rank(t: dict) -> tuple:
+        return (t["gross"], not t["result"].settled, not t["in_place"], not t["stayed"], not t["robust"],
+                not t["loaded"], t["cost"])
+
+    if not ok and fp.tilt_test > 0 and not info["leaning"]:
+        # the fallback: tilt-test the settled results in rank order (only those in place were tested), up to
+        # the first that holds; one that only balances would roll off at the first disturbance
+        for t in sorted(tried, key=rank)[:FALLBACK_TILTS]:
+            if t["gross"] or not t["result"].settled or "tilt_tested" in t:
+                continue
+            mass(t["com"])
+            world.set_pose(oid, t["result"].pose)
+            t["tilt_tested"] = True
+            t["robust"] = holds_when_tilted(world, oid, fp.tilt_test, fp.tilt_frames, fp.joint_tol, fp.joint_tol_deg)
+            t["frames"] += 4 * fp.tilt_frames
+            if t["robust"]:
+                break
+            t["why"] = "; ".join(w for w in (t["why"], f"marginal: tips when tilted {fp.tilt_test:g} deg") if w)
+    best = ok[0] if ok else min(tried, key=rank)
     result = best["result"]
     if not best["ok"]:
         remedy = "closest"
@@ -621,6 +683,10 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         remedy = result.remedy if best["label"] == "none" else best["label"].split()[0]
     reason = "; ".join(f"{t['label']}: {t['why']}" for t in tried if t is not best or not best["ok"])
     final = result.pose
+    mass(best["com"])
+    if best["label"] == "ballast":
+        lowered = fa.com_world(final, props.com / scale)[2] - fa.com_world(final, best["com"])[2]
+        rec["ballast"] = {"com": [_round(v, 12) for v in best["com"]], "lowered": _round(lowered)}
     world.set_pose(oid, final)
     rec["touching"] = best["touching"]
     world.set_static(oid)
@@ -652,11 +718,14 @@ def _lowered(world, oid: str, pose: np.ndarray, below: list[str], clearance: flo
     return out
 
 
-def _with_attached(scene: Scene, attached: dict[str, str]) -> Scene:
-    """``scene`` with the attachments of ``attached`` (id -> what holds it) set on its objects."""
+def _with_attached(scene: Scene, attached: dict[str, str], masses: dict[str, np.ndarray] | None = None) -> Scene:
+    """``scene`` with the attachments of ``attached`` (id -> what holds it) and the declared centres of mass of
+    ``masses`` (id -> (3,) local, remedy ``ballast``) set on its objects."""
     for o in scene.objects:
         if o.id in attached:
             o.attached = attached[o.id]
+        if masses and o.id in masses:
+            o.com = np.asarray(masses[o.id], dtype=float)
     return scene
 
 
@@ -706,6 +775,7 @@ def _collapsed(rec: dict, fp: FaithfulParams) -> bool:
 def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy], params: "AssemblyParams",
                         sim: SimSettings, cache_dir: Path, graph, attached: dict[str, str],
                         poses: dict[str, np.ndarray], objects: dict[str, dict], coms: dict[str, np.ndarray],
+                        masses: dict[str, np.ndarray],
                         progress: Callable[[str], None] | None) -> dict[str, np.ndarray]:
     """Ground again, from its input, each object that joint settling toppled or dropped, against the rest of the
     scene where joint settling left it; then settle the scene jointly once more.
@@ -734,7 +804,7 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
             world.add_ground(scene.ground_height)
             world.add_structure(scene.structure)
             for q, p in context.items():
-                _add_static(world, q, scene.get(q).mesh(), proxies[q], p, sim)
+                _add_static(world, q, scene.get(q).mesh(), proxies[q], p, sim, masses.get(q))
             pose, info = _faithful_start(scene, oid, proxies[oid], graph, context, {}, {}, attached, fp, pp.seed,
                                          cache_dir, rec)
             if params.penetration:
@@ -743,7 +813,7 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
                 pose = _resolve(oid, obj.mesh(), pose, placed, scene.ground_height, pp, cache_dir, rec,
                                 scene.structure, planar, yaw_only=bool(info["below"]))
             new = _settle_faithful(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params, fp, info,
-                                   rec)
+                                   rec, obj.com)
         closer = (fa.closeness(initial, new, info["com"], info["diag"])
                   < fa.closeness(initial, poses[oid], info["com"], info["diag"]))
         objects[oid]["reground"] = {"kept": bool(closer), "settled": rec["settled"], "remedy": rec["settle_remedy"],
@@ -754,13 +824,19 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
         if closer:
             poses[oid] = new
             kept.append(oid)
+            if "ballast" in rec:
+                masses[oid] = np.asarray(rec["ballast"]["com"], dtype=float)
+            elif obj.com is not None:
+                masses[oid] = np.asarray(obj.com, dtype=float)  # grounded again with the input's mass
+            else:
+                masses.pop(oid, None)  # grounded again as a uniform solid
             cert = objects[oid].get("certificate")
             if cert is not None:
                 cert["remedy"] = f"{cert['remedy']}+reground"
                 cert["touching"] = rec.get("touching", cert["touching"])
     if not kept:
         return poses
-    return _joint_settle(_with_attached(scene.with_poses(poses), attached), proxies, sim, cache_dir, fp,
+    return _joint_settle(_with_attached(scene.with_poses(poses), attached, masses), proxies, sim, cache_dir, fp,
                          params.settle_params, objects, coms, {o: np.asarray(scene.get(o).pose, float) for o in order})
 
 

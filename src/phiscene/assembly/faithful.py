@@ -48,15 +48,16 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    corrected pose shifted horizontally in ``shift_directions`` directions by
    steps of the slide bound up to ``max_shift`` (``shifted``, nearest first;
    its slide is measured from the shifted start; the first that stays in place
-   on its supporters ends the search). When none is accepted, a result that is no gross failure (turned
-   past ``max_stable_angle`` or moved past ``onto_reach``: a table flipped over, a chair thrown across the
-   room) is preferred, even one still moving when the settling window closed; among those, the
-   settled result that stayed in place (on its supporters if one did: the
-   graph may name the wrong one), else one that holds
-   when tilted, closest to the corrected input (:func:`closeness`), is taken
-   (``closest``),
-   with the reasons in the certificate. The final pose is always the outcome
-   of free settling at normal settings: the object is never frozen where the
+   on its supporters ends the search); before the shifted starts, when none came to rest level, the corrected
+   pose once more with the centre of mass declared low over its base and flush on the facet it then rests on
+   (``ballast``, :func:`ballast_com`: the object is at rest in the photo, so its mass is not that of a uniform
+   solid). When none is accepted, a result that is no gross failure (turned past ``max_stable_angle`` or moved
+   past ``onto_reach``: a table flipped over, a chair thrown across the room) is preferred, even one still moving
+   when the settling window closed; among those, the settled result that stayed in place (on its supporters if
+   one did: the graph may name the wrong one), else one that holds when tilted (the first ``FALLBACK_TILTS``
+   of :mod:`phiscene.assembly.assemble` in that order are tilt-tested), closest to the corrected input
+   (:func:`closeness`), is taken (``closest``), with the reasons in the certificate. The final pose is always
+   the outcome of free settling at normal settings: the object is never frozen where the
    simulator would not leave it.
 4. **Joint settling**. The sequentially grounded scene is released as a
    whole until every object is at rest (``joint_settle_frames``): a
@@ -179,6 +180,18 @@ class FaithfulParams(Params):
         loaded together, may have shifted under it.
     reground_move
         Displacement (m) in joint settling past which an object is grounded again.
+    ballast
+        Remedy ``ballast``: an object that no start so far brought to rest level (each turned past ``max_turn``,
+        was still moving, or only balanced on an edge) is settled once more from the corrected pose with its
+        centre of mass declared low in its base: over the centroid of its base, inside its convex hull, at
+        ``ballast_height`` of its height above its lowest point (:func:`ballast_com`), before any shifted start.
+        An object at rest in the photo is at rest: a vase whose flowers, as a uniform solid, outweigh its water
+        and glass, a potted plant whose foliage outweighs its soil. Kept when accepted like any start; the
+        declared centre goes into the grounded scene (:attr:`phiscene.scene.SceneObject.com`), where every
+        simulator, metric and export uses it. Its base is its own (a book's whole bottom face), not the part
+        of it its supporter holds: a book over its supporter's edge still tips, and is shifted.
+    ballast_height
+        Height of the declared centre of mass above the object's lowest point, as a share of its height.
     """
 
     _label = "faithful parameters"
@@ -209,6 +222,8 @@ class FaithfulParams(Params):
     onto_reach: float = 0.3
     reground: bool = True
     reground_move: float = 0.09
+    ballast: bool = True
+    ballast_height: float = 0.25
 
     def check(self) -> None:
         """Reject negative bounds and ``retry_damping`` outside [0, 1) (``ValueError``)."""
@@ -222,6 +237,8 @@ class FaithfulParams(Params):
             raise ValueError(f"faithful parameter 'load_depth' must be >= 1, got {self.load_depth}")
         if not 0.0 <= self.retry_damping < 1.0:
             raise ValueError(f"faithful retry_damping must be in [0, 1), got {self.retry_damping}")
+        if not 0.0 < self.ballast_height < 1.0:
+            raise ValueError(f"faithful ballast_height must be in (0, 1), got {self.ballast_height}")
 
 
 def support_normal(mesh_world, parents_world: dict[str, object]) -> np.ndarray:
@@ -277,19 +294,21 @@ def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return Rotation.from_rotvec(axis / s * math.atan2(s, c)).as_matrix()
 
 
-def resting_normals(hull_points: np.ndarray) -> np.ndarray:
+def resting_normals(hull_points: np.ndarray, com: np.ndarray | None = None) -> np.ndarray:
     """Outward normals (k, 3), local frame, of the facets the object's convex hull can rest on.
 
     Parameters
     ----------
     hull_points : (n, 3) float
         Points whose convex hull is the object's collision shape (local, unscaled).
+    com : (3,) float, optional
+        Its centre of mass (local, unscaled); default: the hull's as a uniform solid.
     """
     import trimesh
 
     hull = trimesh.convex.convex_hull(np.asarray(hull_points, dtype=float))
-    transforms, _ = trimesh.poses.compute_stable_poses(hull, center_mass=hull.center_mass, n_samples=1,
-                                                        threshold=0.0)
+    centre = hull.center_mass if com is None else np.asarray(com, dtype=float)
+    transforms, _ = trimesh.poses.compute_stable_poses(hull, center_mass=centre, n_samples=1, threshold=0.0)
     # Each transform rests the hull on z = 0: its resting facet's normal maps to -z.
     return np.array([T[:3, :3].T @ np.array([0.0, 0.0, -1.0]) for T in transforms]).reshape(-1, 3)
 
@@ -493,6 +512,56 @@ def carried(pose: np.ndarray, com_local: np.ndarray, supporter_before: np.ndarra
 def com_world(pose: np.ndarray, com_local: np.ndarray) -> np.ndarray:
     """World position (3,) of a local point (the centre of mass) under ``pose``."""
     return transform_points(pose, np.asarray(com_local, dtype=float)[None])[0]
+
+
+def ballast_com(pose: np.ndarray, com_local: np.ndarray, hull_local: np.ndarray, share: float,
+                base_band: float = 0.05, steps: int = 16) -> np.ndarray | None:
+    """A lower centre of mass for an object at ``pose``, over its base, inside its convex hull.
+
+    The mass of an object at rest in a photo sits low, in its base (a vase's water and glass, a pot's soil);
+    a uniform solid puts it where the bulk of the shape is (the flowers). The declared centre lies at
+    ``share`` of the object's height above its lowest point, over the centroid of its base (the convex hull of
+    its vertices within ``base_band`` of its height above the lowest point, seen from above); when that point is
+    outside the hull, the nearest point inside on the segment from it to the uniform centre.
+
+    Parameters
+    ----------
+    pose : (4, 4) float
+        The object's pose (uniform scale allowed).
+    com_local : (3,) float
+        Its uniform solid's centre of mass, local frame (unscaled).
+    hull_local : (k, 3) float
+        Vertices of its convex hull (or of its convex pieces), local frame (unscaled).
+    share
+        Height of the declared centre above the lowest point, as a share of the object's height at ``pose``.
+    base_band
+        Thickness of the base, as a share of the height.
+    steps
+        Points tried along the segment towards the uniform centre.
+
+    Returns
+    -------
+    The declared centre of mass (3,), local frame (unscaled); ``None`` when the uniform centre is not higher
+    than the target or no point tried is inside the hull.
+    """
+    from scipy.spatial import Delaunay
+    from shapely.geometry import MultiPoint
+
+    points = transform_points(pose, np.asarray(hull_local, dtype=float))
+    lo, hi = float(points[:, 2].min()), float(points[:, 2].max())
+    target = lo + share * (hi - lo)
+    centre = com_world(pose, com_local)
+    if centre[2] <= target + 1e-6:
+        return None
+    base = points[points[:, 2] <= lo + base_band * (hi - lo), :2]
+    foot = MultiPoint([tuple(p) for p in base]).convex_hull.centroid
+    low = np.array([foot.x, foot.y, target])
+    inside = Delaunay(points)
+    for f in np.linspace(0.0, 1.0, steps + 1)[:-1]:
+        p = low + f * (centre - low)
+        if inside.find_simplex(p[None])[0] >= 0:
+            return transform_points(np.linalg.inv(pose), p[None])[0]
+    return None
 
 
 def slide_bound(diag: float, fp: FaithfulParams) -> float:

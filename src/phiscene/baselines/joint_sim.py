@@ -135,7 +135,8 @@ def joint_sim(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, params:
         world.add_structure(scene.structure)  # walls and ceiling: static colliders
         for o in scene.objects:
             hulls = proxies[o.id].hulls
-            world.add_body(o.id, hulls, o.pose, rigid_props(o.mesh(), hulls, sim.density, decompose(o.pose)[2]))
+            world.add_body(o.id, hulls, o.pose, rigid_props(o.mesh(), hulls, sim.density, decompose(o.pose)[2],
+                                                               o.com))
             if o.attached is not None:
                 world.set_static(o.id)  # fixed to a wall or the ceiling: a collider, never released
         history = {oid: deque([world.pose(oid)], maxlen=params.window + 1) for oid in ids}

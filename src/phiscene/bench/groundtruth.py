@@ -136,7 +136,7 @@ def scene_world(scene: Scene, settings: SimSettings, proxies: dict[str, Proxy],
             if o.attached is not None:  # fixed to a wall (or the ground): a static collider, no mass
                 world.add_body(o.id, hulls, o.pose, None)
                 continue
-            props = rigid_props(o.mesh(), hulls, settings.density, decompose(o.pose)[2])
+            props = rigid_props(o.mesh(), hulls, settings.density, decompose(o.pose)[2], o.com)
             world.add_body(o.id, hulls, o.pose, props)
             masses[o.id] = props.mass
         yield world, masses

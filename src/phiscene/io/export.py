@@ -160,7 +160,7 @@ def object_props(scene: "Scene", proxies: dict[str, "Proxy"], sim: SimSettings) 
     out = {}
     for o in scene.objects:
         _, _, scale = decompose(o.pose)
-        out[o.id] = rigid_props(o.mesh(), proxies[o.id].hulls, sim.density, scale)
+        out[o.id] = rigid_props(o.mesh(), proxies[o.id].hulls, sim.density, scale, o.com)
     return out
 
 

@@ -160,7 +160,7 @@ def drift_bullet(scene: "Scene", proxies: dict[str, "Proxy"], params: DriftParam
             lifted = np.array(o.pose, dtype=float)
             if o.attached is None:
                 lifted[:3, 3] += offset
-            world.add_body(o.id, hulls, lifted, rigid_props(o.mesh(), hulls, sim.density, scale))
+            world.add_body(o.id, hulls, lifted, rigid_props(o.mesh(), hulls, sim.density, scale, o.com))
             if o.attached is not None:
                 world.set_static(o.id)
         com0 = {o.id: world.com_position(o.id) - offset for o in scene.objects if o.attached is None}

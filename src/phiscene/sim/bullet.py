@@ -258,6 +258,10 @@ class BulletWorld:
         self.set_pose(name, pose)
         return uid
 
+    def remove_body(self, name: str) -> None:
+        """Take body ``name`` out of the world (to add it again with other mass properties)."""
+        self.p.removeBody(self.bodies.pop(name).uid)
+
     # -- poses ----------------------------------------------------------------------
     def set_pose(self, name: str, pose: np.ndarray) -> None:
         """Place body ``name`` at phiscene pose ``pose`` (its scale must match the body's) and zero its velocity."""

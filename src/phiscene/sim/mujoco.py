@@ -283,7 +283,7 @@ def build_spec(scene: "Scene", proxies: dict[str, "Proxy"], sim: SimSettings, gr
         if proxy is None or not proxy.hulls:
             raise InputError(scene.source, f"{where}.id", f"no convex proxies for object {o.id!r}")
         _, _, scale = decompose(o.pose)
-        props = rigid_props(o.mesh(), proxy.hulls, sim.density, scale)
+        props = rigid_props(o.mesh(), proxy.hulls, sim.density, scale, o.com)
         frame = body_frame(o.pose, props)
         body = spec.worldbody.add_body()
         body.name = o.id

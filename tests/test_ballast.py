@@ -1,0 +1,124 @@
+"""Remedy ``ballast``: an object at rest in the input that topples as a uniform solid gets a lower centre of mass.
+
+Oracles: the parallel-axis theorem for the declared centre's inertia; statics (a body stands when its centre of
+mass is over its base) for which shapes tip and which stand; MuJoCo, an independent simulator, for whether the
+declared centre of mass, written to the scene file, is the one that holds the object up.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+from scenes import convex_proxies
+
+from phiscene.assembly import AssemblyParams, ground_scene
+from phiscene.assembly.faithful import ballast_com
+from phiscene.inertia import rigid_props
+from phiscene.meshes import save_mesh
+from phiscene.metrics.drift import drift_mujoco
+from phiscene.metrics.physical import PhysicalParams
+from phiscene.scene import Scene, SceneObject, load_scene, save_scene
+from phiscene.sim.settings import SimSettings
+from phiscene.topology.graph import SupportEdge, SupportGraph
+from phiscene.transforms import decompose, make_pose
+
+torch.set_num_threads(1)
+SIM = SimSettings()
+
+#: The oblique frustum: base radius, top radius, height, top centre's offset along x (m).
+BASE, TOP, HEIGHT, LEAN = 0.015, 0.08, 0.2, 0.03
+
+
+def frustum() -> trimesh.Trimesh:
+    """A convex oblique frustum standing on its narrow base (centred on the origin, z = 0): its wide top leans
+    ``LEAN`` along +x, like a bouquet in a vase. As a uniform solid its centre of mass is ``LEAN`` times its
+    height share along x, outside the base (module test below): it tips over."""
+    a = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    bottom = np.c_[BASE * np.cos(a), BASE * np.sin(a), np.zeros_like(a)]
+    top = np.c_[LEAN + TOP * np.cos(a), TOP * np.sin(a), np.full_like(a, HEIGHT)]
+    return trimesh.convex.convex_hull(np.vstack([bottom, top]))
+
+
+@pytest.fixture(scope="module")
+def vase(tmp_path_factory):
+    root = tmp_path_factory.mktemp("ballast")
+    return {"root": root, "cache": root / "cache", "mesh": save_mesh(frustum(), root / "vase.obj")}
+
+
+def test_uniform_frustum_centre_of_mass_is_outside_its_base():
+    # the closed form of the frustum's centroid height, and its x offset (the section centres move linearly)
+    a, b = BASE, TOP
+    zc = HEIGHT * (a * a + 2 * a * b + 3 * b * b) / (4 * (a * a + a * b + b * b))
+    com = frustum().center_mass
+    assert com[2] == pytest.approx(zc, rel=0.02)  # 32-gon sections: within 2 % of the circular frustum
+    assert com[0] == pytest.approx(LEAN * zc / HEIGHT, rel=0.02)
+    assert math.hypot(com[0], com[1]) > BASE  # outside the base: it cannot stand as a uniform solid
+
+
+def test_declared_centre_of_mass_keeps_the_mass_and_shifts_the_inertia_by_the_parallel_axis_theorem():
+    box = trimesh.creation.box((0.2, 0.1, 0.4))
+    uniform = rigid_props(box, None, 500.0)
+    d = np.array([0.01, -0.02, -0.1])
+    moved = rigid_props(box, None, 500.0, com=d)
+    assert moved.mass == pytest.approx(uniform.mass)
+    np.testing.assert_allclose(moved.com, d, atol=1e-12)
+    def inertia(p):
+        return p.principal_axes @ np.diag(p.principal_moments) @ p.principal_axes.T
+
+    expected = inertia(uniform) + uniform.mass * (d @ d * np.eye(3) - np.outer(d, d))
+    np.testing.assert_allclose(inertia(moved), expected, rtol=1e-9, atol=1e-12)
+    scaled = rigid_props(box, None, 500.0, scale=2.0, com=d)  # declared in the unscaled frame
+    np.testing.assert_allclose(scaled.com, 2.0 * d, atol=1e-12)
+
+
+def test_ballast_com_is_over_the_base_low_and_inside_the_hull():
+    mesh = frustum()
+    pose = make_pose(translation=(0.3, -0.2, 0.5))
+    c = ballast_com(pose, mesh.center_mass, mesh.vertices, 0.25)
+    np.testing.assert_allclose(c[:2], [0.0, 0.0], atol=1e-3)  # over the base's centre
+    assert c[2] == pytest.approx(0.25 * HEIGHT, abs=1e-6)
+    assert mesh.contains([c])[0]
+    assert ballast_com(pose, np.array([0.0, 0.0, 0.01]), mesh.vertices, 0.25) is None  # already low
+
+
+def run(vase, ballast: bool):
+    pose = make_pose(translation=(0.0, 0.0, 0.001))
+    scene = Scene([SceneObject("vase", vase["mesh"], pose, "glass vase with flowers")])
+    graph = SupportGraph(objects=["vase"], edges=[SupportEdge("ground", "vase", "supports")], order=["vase"])
+    proxies = convex_proxies(scene, vase["cache"])
+    params = AssemblyParams.from_dict({"faithful": {"enabled": True, "ballast": ballast}})
+    out, rec = ground_scene(scene, ["vase"], proxies, params, SIM, vase["cache"], graph=graph)
+    return pose, out, rec, proxies
+
+
+def test_a_vase_that_topples_as_a_uniform_solid_stands_where_it_was_with_a_ballast(vase):
+    pose, out, rec, proxies = run(vase, ballast=True)
+    obj = out.get("vase")
+    R, t, _ = decompose(obj.pose)
+    cert = rec["objects"]["vase"]["certificate"]
+    assert cert["remedy"] == "ballast" and cert["settled"] and cert["supporters_kept"]
+    assert math.degrees(math.acos(min(1.0, R[2, 2]))) < 1.0  # upright
+    assert np.linalg.norm(t[:2] - pose[:2, 3]) < 0.01
+    assert obj.com is not None and math.hypot(obj.com[0], obj.com[1]) < BASE / 3  # over its base
+    assert obj.com[2] == pytest.approx(0.25 * HEIGHT, abs=2e-3)
+    # the declared centre travels with the scene file, and an independent simulator finds it standing there;
+    # released as a uniform solid instead, the same pose tips over
+    saved = load_scene(save_scene(out, vase["root"] / "out" / "scene.json"))
+    np.testing.assert_allclose(saved.get("vase").com, obj.com, atol=1e-9)
+    held = drift_mujoco(saved, proxies, PhysicalParams(), SIM)
+    assert held["drift_trans"] < 1e-3 and held["drift_rot"] < 0.5
+    saved.get("vase").com = None
+    uniform = drift_mujoco(saved, proxies, PhysicalParams(), SIM)
+    assert uniform["drift_rot"] > 10.0
+
+
+def test_without_the_remedy_the_vase_is_left_toppled(vase):
+    _, out, rec, _ = run(vase, ballast=False)
+    R, _, _ = decompose(out.get("vase").pose)
+    assert rec["objects"]["vase"]["certificate"]["remedy"] == "closest"
+    assert math.degrees(math.acos(min(1.0, R[2, 2]))) > 45.0  # on its side
+    assert out.get("vase").com is None
