@@ -122,3 +122,19 @@ def test_without_the_remedy_the_vase_is_left_toppled(vase):
     assert rec["objects"]["vase"]["certificate"]["remedy"] == "closest"
     assert math.degrees(math.acos(min(1.0, R[2, 2]))) > 45.0  # on its side
     assert out.get("vase").com is None
+
+
+def test_the_declared_centre_of_mass_is_the_one_the_mjcf_export_gives_mujoco(vase, tmp_path):
+    import mujoco
+
+    from phiscene.io.export import export_mjcf
+
+    _, out, _, proxies = run(vase, ballast=True)
+    com = out.get("vase").com
+    model = mujoco.MjModel.from_xml_path(str(export_mjcf(out, proxies, tmp_path / "scene.xml", SIM)))
+    b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "vase")
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    # MuJoCo's own world centre of mass of the body is the declared centre carried to the world by the pose
+    R, t, s = decompose(out.get("vase").pose)
+    np.testing.assert_allclose(data.xipos[b], R @ (s * com) + t, atol=1e-6)
