@@ -268,7 +268,8 @@ def load_scene(path: str | Path, check_meshes: bool = True) -> Scene:
         missing or unusable mesh files, and (with ``check_meshes``) objects
         that reach beyond ``TOL.max_coordinate`` from the origin, are larger
         than ``TOL.max_object_size`` (a scene not in metres) or lie more than
-        ``TOL.max_below_ground`` below the ground.
+        ``TOL.max_below_ground`` below the ground; a declared centre of mass
+        (``com``) that is not finite, or (with ``check_meshes``) outside the mesh's bounds.
     """
     path = Path(path)
     data = schemas.read_json(path)
@@ -321,6 +322,11 @@ def load_scene(path: str | Path, check_meshes: bool = True) -> Scene:
             except InputError as exc:
                 raise InputError(path, f"objects[{i}].mesh", exc.problem) from None
             _check_placement(path, i, o, mesh.bounds, ground)
+            pad = TOL.com_bounds_pad
+            if o.com is not None and not np.all((o.com >= mesh.bounds[0] - pad) & (o.com <= mesh.bounds[1] + pad)):
+                raise InputError(path, f"objects[{i}].com", f"declared centre of mass {o.com.tolist()} lies outside "
+                                 f"the mesh's bounds {mesh.bounds.tolist()} (local frame): no mass distribution "
+                                 "of the object has it there")
     return scene
 
 

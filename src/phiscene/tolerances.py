@@ -40,6 +40,9 @@ class Tolerances:
     footprint_resolution
         Footprint areas (m^2) are compared in units of this when ordering objects, so equal
         objects tie exactly and fall back to id order.
+    com_bounds_pad
+        How far (m, local frame) a declared centre of mass (``com`` in ``scene.json``) may lie outside
+        its mesh's bounding box (rounding); farther is refused.
     """
 
     pose_orthogonality: float = 1e-5
@@ -52,6 +55,7 @@ class Tolerances:
     max_below_ground: float = 1.0
     sdf_aabb_pad: float = 1e-6
     footprint_resolution: float = 1e-6
+    com_bounds_pad: float = 1e-6
 
 
 TOL = Tolerances()

@@ -303,6 +303,13 @@ CASES: list[Case] = [
     Case("pose_projective", edit_scene(set_pose(1, _projective())), "scene.json", "objects[1].pose", "last row"),
     Case("pose_scale_tiny", edit_scene(set_pose(1, make_pose(translation=[0, 0, 0.2], scale=1e-5))), "scene.json",
          "objects[1].pose", "uniform scale"),
+    # declared centres of mass
+    Case("com_two_numbers", edit_scene(lambda d: d["objects"][1].update(com=[0.0, 0.0])), "scene.json",
+         "objects[1].com", "expected at least 3"),
+    Case("com_inf", edit_scene(lambda d: d["objects"][1].update(com=[0.0, 0.0, float("inf")])), "scene.json",
+         "objects[1].com", "must be finite"),
+    Case("com_outside_the_object", edit_scene(lambda d: d["objects"][1].update(com=[0.0, 0.0, 0.3])), "scene.json",
+         "objects[1].com", "outside the mesh's bounds"),
     # placement and units
     Case("object_kilometres_away", edit_scene(set_pose(1, make_pose(translation=[2500.0, 0, 0.05]))), "scene.json",
          "objects[1].pose", "units must be metres"),
