@@ -470,18 +470,20 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
     return {"parents": parents, "below": below, "leaning": leaning_ids, "up": up, "normals": normals, "com": com,
             "flushable": flushable, "flush_angle": 0.0, "diag": float(np.linalg.norm(mesh.extents) * scale),
             "placed": list(poses), "input": np.asarray(obj.pose, dtype=float),
-            "walls": [q for q in scene.structure if q.kind == "wall"]}
+            "walls": [q for q in scene.structure if q.kind == "wall"], "cache_dir": cache_dir}
 
 
-def _resting_normals(hull_points: np.ndarray, cache_dir: Path) -> np.ndarray:
-    """:func:`~phiscene.assembly.faithful.resting_normals` of a hull (k, 3), cached in ``cache_dir/resting`` by
-    the hull's vertices (enumerating the resting poses of a 500-vertex hull takes about 0.4 s)."""
+def _resting_normals(hull_points: np.ndarray, cache_dir: Path, com: np.ndarray | None = None) -> np.ndarray:
+    """:func:`~phiscene.assembly.faithful.resting_normals` of a hull (k, 3) with centre of mass ``com`` (3,)
+    (default the uniform solid's), cached in ``cache_dir/resting`` by the hull's vertices and ``com``
+    (enumerating the resting poses of a 500-vertex hull takes about 0.4 s)."""
     import hashlib
 
     from phiscene.atomic import atomic_path
 
     points = np.ascontiguousarray(hull_points, dtype=float)
-    key = hashlib.sha256(points.tobytes() + str(points.shape).encode()).hexdigest()[:20]
+    extra = b"" if com is None else b"com" + np.ascontiguousarray(com, dtype=float).tobytes()
+    key = hashlib.sha256(points.tobytes() + str(points.shape).encode() + extra).hexdigest()[:20]
     path = Path(cache_dir) / "resting" / f"{key}.npy"
     if path.exists():
         try:
@@ -490,7 +492,7 @@ def _resting_normals(hull_points: np.ndarray, cache_dir: Path) -> np.ndarray:
                 return cached
         except (OSError, ValueError):
             pass  # unreadable: recompute and rewrite
-    normals = fa.resting_normals(points)
+    normals = fa.resting_normals(points, com)
     with atomic_path(path) as tmp:
         np.save(tmp, normals)
     return normals
@@ -633,8 +635,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
             if declared is not None and fp.flush and info["flushable"]:
                 # flush on the facet it rests on with that centre of mass (a vase's base is no resting facet of
                 # the uniform solid), then the centre over that base
-                start, angle = fa.flush_pose(pose, fa.resting_normals(points, declared), declared, info["up"],
-                                             fp.max_flush_angle)
+                start, angle = fa.flush_pose(pose, _resting_normals(points, info["cache_dir"], declared), declared,
+                                             info["up"], fp.max_flush_angle)
                 if angle > 0:
                     declared = fa.ballast_com(start, props.com / scale, points, fp.ballast_height)
             if declared is not None:
