@@ -225,8 +225,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             if params.settle and info is not None:
                 pose = _settle_faithful(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params,
                                         fp, info, rec, masses.get(oid))
-                if "ballast" in rec:
-                    masses[oid] = np.asarray(rec["ballast"]["com"], dtype=float)
+                _keep_mass(masses, oid, rec, obj.com)
             elif params.settle:
                 pose = _settle(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params, rec,
                                masses.get(oid))
@@ -537,6 +536,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
 
     tried: list[dict] = []
     scale = decompose(pose)[2]
+    own = props.com / scale  # its centre of mass as it came (local, unscaled)
     body = {"com": com}  # the centre of mass the body in the world has (declared, local; None: uniform)
 
     def mass(declared: np.ndarray | None) -> None:  # the body again, with another centre of mass
@@ -595,9 +595,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                "loaded": not gave,
                "stayed": stayed, "in_place": in_place, "travel": moved if not lost else math.inf,
                "cost": fa.closeness(pose, result.pose, info["com"], info["diag"], start=lowered) + fell,
-               "why": "; ".join(w for w in whys if w), "touching": near, "com": body["com"]}
-        if tested:
-            out["tilt_tested"] = True
+               "why": "; ".join(w for w in whys if w), "touching": near, "com": body["com"], "tilt_tested": tested}
         tried.append(out)
         return out
 
@@ -630,7 +628,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                 t["turned"] > fp.max_turn or not t["result"].settled or not t["robust"] for t in tried):
             # none came to rest level: at rest in the photo, so not a uniform solid (flowers outweighing a vase)
             points = np.vstack(proxy.hulls)
-            declared = fa.ballast_com(pose, props.com / scale, points, fp.ballast_height)
+            declared = fa.ballast_com(pose, own, points, fp.ballast_height)
             start = pose
             if declared is not None and fp.flush and info["flushable"]:
                 # flush on the facet it rests on with that centre of mass (a vase's base is no resting facet of
@@ -638,7 +636,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                 start, angle = fa.flush_pose(pose, _resting_normals(points, info["cache_dir"], declared), declared,
                                              info["up"], fp.max_flush_angle)
                 if angle > 0:
-                    declared = fa.ballast_com(start, props.com / scale, points, fp.ballast_height)
+                    declared = fa.ballast_com(start, own, points, fp.ballast_height)
             if declared is not None:
                 mass(declared)
                 if not attempt("ballast", start, origin=start)["ok"]:  # the flush is a correction, as for none
@@ -667,7 +665,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         # the fallback: tilt-test the settled results in rank order (only those in place were tested), up to
         # the first that holds; one that only balances would roll off at the first disturbance
         for t in sorted(tried, key=rank)[:FALLBACK_TILTS]:
-            if t["gross"] or not t["result"].settled or "tilt_tested" in t:
+            if t["gross"] or not t["result"].settled or t["tilt_tested"]:
                 continue
             mass(t["com"])
             world.set_pose(oid, t["result"].pose)
@@ -687,7 +685,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
     final = result.pose
     mass(best["com"])
     if best["label"] == "ballast":
-        lowered = fa.com_world(final, props.com / scale)[2] - fa.com_world(final, best["com"])[2]
+        lowered = fa.com_world(final, own)[2] - fa.com_world(final, best["com"])[2]
         rec["ballast"] = {"com": [_round(v, 12) for v in best["com"]], "lowered": _round(lowered)}
     world.set_pose(oid, final)
     rec["touching"] = best["touching"]
@@ -718,6 +716,17 @@ def _lowered(world, oid: str, pose: np.ndarray, below: list[str], clearance: flo
             break
         out[2, 3] -= gap - clearance / 2
     return out
+
+
+def _keep_mass(masses: dict[str, np.ndarray], oid: str, rec: dict, given: np.ndarray | None) -> None:
+    """Record in ``masses`` (id -> (3,) local) the centre of mass ``oid`` was grounded with: the one the remedy
+    ``ballast`` declared (``rec["ballast"]``), else its input's ``given`` one, else none (a uniform solid)."""
+    if "ballast" in rec:
+        masses[oid] = np.asarray(rec["ballast"]["com"], dtype=float)
+    elif given is not None:
+        masses[oid] = np.asarray(given, dtype=float)
+    else:
+        masses.pop(oid, None)
 
 
 def _with_attached(scene: Scene, attached: dict[str, str], masses: dict[str, np.ndarray] | None = None) -> Scene:
@@ -826,12 +835,7 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
         if closer:
             poses[oid] = new
             kept.append(oid)
-            if "ballast" in rec:
-                masses[oid] = np.asarray(rec["ballast"]["com"], dtype=float)
-            elif obj.com is not None:
-                masses[oid] = np.asarray(obj.com, dtype=float)  # grounded again with the input's mass
-            else:
-                masses.pop(oid, None)  # grounded again as a uniform solid
+            _keep_mass(masses, oid, rec, obj.com)
             cert = objects[oid].get("certificate")
             if cert is not None:
                 cert["remedy"] = f"{cert['remedy']}+reground"

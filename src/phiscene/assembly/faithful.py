@@ -522,14 +522,14 @@ def ballast_com(pose: np.ndarray, com_local: np.ndarray, hull_local: np.ndarray,
     a uniform solid puts it where the bulk of the shape is (the flowers). The declared centre lies at
     ``share`` of the object's height above its lowest point, over the centroid of its base (the convex hull of
     its vertices within ``base_band`` of its height above the lowest point, seen from above); when that point is
-    outside the hull, the nearest point inside on the segment from it to the uniform centre.
+    outside the hull, the nearest point inside on the segment from it to the current centre.
 
     Parameters
     ----------
     pose : (4, 4) float
         The object's pose (uniform scale allowed).
     com_local : (3,) float
-        Its uniform solid's centre of mass, local frame (unscaled).
+        Its centre of mass as it is (the uniform solid's, or one declared before), local frame (unscaled).
     hull_local : (k, 3) float
         Vertices of its convex hull (or of its convex pieces), local frame (unscaled).
     share
@@ -537,11 +537,11 @@ def ballast_com(pose: np.ndarray, com_local: np.ndarray, hull_local: np.ndarray,
     base_band
         Thickness of the base, as a share of the height.
     steps
-        Points tried along the segment towards the uniform centre.
+        Points tried along the segment towards the current centre.
 
     Returns
     -------
-    The declared centre of mass (3,), local frame (unscaled); ``None`` when the uniform centre is not higher
+    The declared centre of mass (3,), local frame (unscaled); ``None`` when the current centre is not higher
     than the target or no point tried is inside the hull.
     """
     from scipy.spatial import Delaunay
