@@ -93,6 +93,9 @@ def cmd_ground(args: argparse.Namespace) -> None:
     given = Path(args.given) if args.given else scene.parent.parent / "gt" / "topology.json"
     if backend == "given" and not given.is_file():
         raise PhisceneError(f"{given}: topology file not found (pass --given FILE)")
+    camera = Path(args.camera) if args.camera else scene.parent.parent / "reference" / "camera.json"
+    if args.camera and not camera.is_file():
+        raise PhisceneError(f"{camera}: camera file not found")
     topo = cfg.get("topology", {})
     stages = [
         ("proxies", lambda: pipeline.run_proxies(scene, out / "proxies.npz", proxy_settings, cache)),
@@ -102,7 +105,7 @@ def cmd_ground(args: argparse.Namespace) -> None:
         ("grounding", lambda: pipeline.run_ground(
             scene, out / "topology.json", out / "proxies.npz", out / "scene.json", out / "assembly.json",
             assembly, cfg.get("sim", {}), cache,
-            progress=lambda msg: print(f"      {msg}", flush=True))),
+            progress=lambda msg: print(f"      {msg}", flush=True), camera_path=camera if camera.is_file() else None)),
     ]
     total = time.perf_counter()
     for k, (name, run) in enumerate(stages):
@@ -251,6 +254,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: phi_scene, faithful grounding; phi_scene_paper: the paper's loop)")
     g.add_argument("--topology", default=None, help="topology backend (default: the method's, else geometric)")
     g.add_argument("--given", help="topology JSON for --topology given (default: ../gt/topology.json)")
+    g.add_argument("--camera", help="the photo's camera.json in the scene's frame, for the method's faithful.ray "
+                                    "(default: ../reference/camera.json when it exists)")
     g.add_argument("--suite", help="take the proxy settings of this suite of the config (e.g. real: the lighter "
                                    "CoACD search for 30k-face reconstructions; default: the global proxies section)")
     g.set_defaults(func=cmd_ground)

@@ -52,10 +52,15 @@ def run_topology(scene_path: str | Path, out_path: str | Path, backend: str, par
 
 def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: str | Path,
                out_scene: str | Path, out_log: str | Path, assembly: dict, sim: dict, cache_dir: str | Path,
-               progress: Callable[[str], None] | None = None) -> None:
-    """phi-Scene grounding of one scene in its topology's order."""
+               progress: Callable[[str], None] | None = None, camera_path: str | Path | None = None) -> None:
+    """phi-Scene grounding of one scene in its topology's order.
+
+    ``camera_path`` is the photo's ``camera.json`` in the scene's frame, for the faithful variant's ``ray``
+    remedy (:func:`~phiscene.assembly.faithful.ray_corrected`); without one that remedy is skipped (logged).
+    """
     from phiscene import topology
     from phiscene.assembly.assemble import AssemblyParams, ground_scene
+    from phiscene.render import camera_eye, read_camera
     from phiscene.topology.attached import attached_ids
 
     use_disk_cache(cache_dir)
@@ -64,9 +69,12 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
     proxies = read_proxies(proxies_path)
     fixed = dict(attached_ids(graph, holders=True))
     fixed.update({o.id: o.attached for o in scene.objects if o.attached is not None})
-    settled, record = ground_scene(scene, graph.order, proxies, AssemblyParams.from_dict(assembly),
-                                   SimSettings.from_dict(sim), Path(cache_dir), progress=progress or log.info,
-                                   graph=graph, attached=fixed)
+    params = AssemblyParams.from_dict(assembly)
+    eye = camera_eye(read_camera(camera_path)) if camera_path is not None else None
+    if eye is None and params.faithful.enabled and params.faithful.ray:
+        log.warning("%s: faithful.ray needs the photo's camera (none given): closing gaps straight down", scene_path)
+    settled, record = ground_scene(scene, graph.order, proxies, params, SimSettings.from_dict(sim), Path(cache_dir),
+                                   progress=progress or log.info, graph=graph, attached=fixed, eye=eye)
     record["topology"] = str(topology_path)
     write_json(out_log, record)
     save_scene(settled, out_scene)

@@ -215,6 +215,12 @@ def read_camera(path: str | Path) -> dict:
     return cam
 
 
+def camera_eye(camera: dict) -> np.ndarray:
+    """The camera's centre (3,), world frame, from its ``world_to_camera``."""
+    T = np.asarray(camera["world_to_camera"], dtype=float)
+    return -T[:3, :3].T @ T[:3, 3]
+
+
 def project(camera: dict, points: np.ndarray) -> np.ndarray:
     """Pixel coordinates (n, 2) ``(u, v)`` of world points (n, 3) under ``camera``."""
     T = np.asarray(camera["world_to_camera"], dtype=float)

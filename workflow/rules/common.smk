@@ -183,6 +183,22 @@ def method_topology(wildcards):
     return f"results/topology/{backend}/{wildcards.suite}/{wildcards.scene}.json"
 
 
+def phi_scene_inputs(wildcards):
+    """A phi_scene-kind job's inputs: initial scene, its method's support graph, proxies, and the photo's camera
+    when the method closes gaps along camera rays (`faithful.ray`) and the suite has one."""
+    base = f"results/scenes/{wildcards.suite}/{wildcards.scene}"
+    inputs = {
+        "scene": f"{base}/initial/scene.json",
+        "topology": method_topology(wildcards),
+        "proxies": f"results/proxies/{wildcards.suite}/{wildcards.scene}.npz",
+    }
+    faithful = method_assembly(wildcards).get("faithful", {})
+    has_camera = wildcards.suite in benchmark_suites() or wildcards.suite in source_suites("rest3d")
+    if faithful.get("enabled") and faithful.get("ray") and has_camera:
+        inputs["camera"] = f"{base}/reference/camera.json"
+    return inputs
+
+
 def method_assembly(wildcards):
     """Assembly settings of a job's phi_scene-kind method: its `assembly` override deep-merged over `assembly`."""
     return phiscene.config.method_assembly(config, wildcards.method)

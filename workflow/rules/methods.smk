@@ -5,9 +5,7 @@
 
 rule phi_scene:
     input:
-        scene="results/scenes/{suite}/{scene}/initial/scene.json",
-        topology=method_topology,
-        proxies="results/proxies/{suite}/{scene}.npz",
+        unpack(phi_scene_inputs),
     output:
         scene="results/methods/{method}/{suite}/{scene}/scene.json",
         log_json="results/methods/{method}/{suite}/{scene}/assembly.json",

@@ -116,7 +116,8 @@ def _round(v, digits: int = 9) -> float | None:
 
 def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], params: AssemblyParams,
                  sim: SimSettings, cache_dir: Path, progress: Callable[[str], None] | None = None,
-                 graph=None, attached: dict[str, str] | None = None) -> tuple[Scene, dict]:
+                 graph=None, attached: dict[str, str] | None = None,
+                 eye: np.ndarray | None = None) -> tuple[Scene, dict]:
     """Physically ground a scene by topology-ordered penetration resolution and settling.
 
     Parameters
@@ -142,6 +143,9 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     graph
         The support graph (:class:`~phiscene.topology.graph.SupportGraph`) whose supporters the faithful
         variant keeps; without it every object is taken to stand on the ground.
+    eye : (3,) float, optional
+        The photo's camera centre in the scene's frame, for the faithful remedy ``ray``
+        (:func:`~phiscene.assembly.faithful.ray_corrected`; skipped without it).
 
     Returns
     -------
@@ -153,7 +157,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         ``sdf_context``, ``sdf_grid_error`` (max grid error near the surface, m), ``settle_frames``,
         ``settled``, ``settle_remedy``, ``residual_translation``, ``residual_rotation``,
         ``settle_translation``, ``settle_rotation``, ``displacement``, ``rotation_change``, ``seconds`` per
-        stage) and a ``summary``; with ``params.faithful.enabled`` also ``flush_angle`` and a
+        stage) and a ``summary``; with ``params.faithful.enabled`` also ``flush_angle`` (and ``ray_shift``, m,
+        with ``ray`` and ``eye``) and a
         ``certificate`` per object (:func:`~phiscene.assembly.faithful.certificate`).
     """
     from phiscene.sim.bullet import BulletWorld
@@ -207,7 +212,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             if fp.enabled:
                 t0 = time.perf_counter()
                 pose, info = _faithful_start(scene, oid, proxies.get(oid), graph, poses, world_meshes, surfaces,
-                                             attached, fp, pp.seed, cache_dir, rec)
+                                             attached, fp, pp.seed, cache_dir, rec, eye)
                 rec["seconds"]["flush"] = time.perf_counter() - t0
 
             t0 = time.perf_counter()
@@ -318,9 +323,11 @@ def _flushed_on(plane, obj, proxy: Proxy | None, pose: np.ndarray, max_angle_deg
 
 def _faithful_start(scene: Scene, oid: str, proxy: Proxy | None, graph, poses: dict[str, np.ndarray],
                     world_meshes: dict[str, object], surfaces: dict[str, np.ndarray], attached: dict[str, str],
-                    fp: FaithfulParams, seed: int, cache_dir: Path, rec: dict) -> tuple[np.ndarray, dict]:
+                    fp: FaithfulParams, seed: int, cache_dir: Path, rec: dict,
+                    eye: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
     """The faithful variant's start for ``oid`` among the placed objects ``poses`` (id -> (4, 4)): its input pose
-    carried with its supporter and turned flush onto it, and what the later stages need
+    carried with its supporter, moved along the camera ray from ``eye`` (remedy ``ray``, when on and ``eye`` is
+    given) and turned flush onto it, and what the later stages need
     (:func:`_faithful_info`, with ``surfaces`` and ``fixed``). ``world_meshes`` and ``surfaces`` are per-id caches
     shared between calls on the same placed poses. Fills ``rec`` (``carried_by``, ``flush_angle``)."""
     obj = scene.get(oid)
@@ -332,6 +339,10 @@ def _faithful_start(scene: Scene, oid: str, proxy: Proxy | None, graph, poses: d
     if fp.carry and carrier is not None:
         pose = fa.carried(pose, info["com"], np.asarray(scene.get(carrier).pose, float), poses[carrier])
         rec["carried_by"] = carrier
+    if fp.ray and eye is not None and info["below"] and not info["leaning"]:
+        pose, shift = fa.ray_corrected(pose, info["points"], info["com"], info["below_world"], scene.ground_height,
+                                       eye, fp)
+        rec["ray_shift"] = _round(shift)
     if fp.flush and info["flushable"]:
         pose, info["flush_angle"] = fa.flush_pose(pose, info["normals"], info["com"], info["up"],
                                                   fp.max_flush_angle)
@@ -469,7 +480,8 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
     return {"parents": parents, "below": below, "leaning": leaning_ids, "up": up, "normals": normals, "com": com,
             "flushable": flushable, "flush_angle": 0.0, "diag": float(np.linalg.norm(mesh.extents) * scale),
             "placed": list(poses), "input": np.asarray(obj.pose, dtype=float),
-            "walls": [q for q in scene.structure if q.kind == "wall"], "cache_dir": cache_dir}
+            "walls": [q for q in scene.structure if q.kind == "wall"], "cache_dir": cache_dir,
+            "points": points, "below_world": parents_world}
 
 
 def _resting_normals(hull_points: np.ndarray, cache_dir: Path, com: np.ndarray | None = None) -> np.ndarray:
