@@ -86,3 +86,19 @@ def _check_plugin_outputs(root):
         for a, b in zip(initial.objects, dropped.objects):
             assert b.world_mesh().vertices[:, 2].min() == pytest.approx(dropped.ground_height, abs=1e-6)
             assert a.pose[:2, 3] == pytest.approx(b.pose[:2, 3])
+
+
+@pytest.mark.parametrize("ray", [False, True])
+def test_grounding_reads_the_camera_only_when_a_method_closes_gaps_along_its_rays(tmp_path, ray):
+    """`assembly.faithful.ray` makes the photo's camera an input of the grounding job; off, it is none (a suite
+    without a camera, 3D-FRONT's, grounds as before)."""
+    cfg = tmp_path / "ray.yaml"
+    cfg.write_text(f"assembly:\n  faithful:\n    ray: {str(ray).lower()}\n")
+    target = "results/methods/phi_scene/contact/scene_000/scene.json"
+    res = run(["-s", str(ROOT / "Snakefile"), "--directory", str(tmp_path), "-n", target, "--configfile", str(cfg)],
+              ROOT)
+    assert res.returncode == 0, res.stderr[-4000:]
+    out = res.stdout + res.stderr
+    block = out[out.index("rule phi_scene:"):]
+    inputs = block[:block.index("output:")]
+    assert ("results/scenes/contact/scene_000/reference/camera.json" in inputs) == ray

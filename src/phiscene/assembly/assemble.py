@@ -258,14 +258,14 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             if progress is not None:
                 progress(_progress_line(index, len(order), oid, rec))
     if params.faithful.enabled and params.settle and params.faithful.joint_settle_frames > 0:
-        poses = _joint_settle(_with_attached(scene.with_poses(poses), attached, masses), proxies, sim, cache_dir,
+        poses = _joint_settle(_as_grounded(scene.with_poses(poses), attached, masses), proxies, sim, cache_dir,
                               params.faithful, params.settle_params, objects, coms,
                               {o: np.asarray(scene.get(o).pose, float) for o in order})
         if params.faithful.reground:
             poses = _reground_collapsed(scene, order, proxies, params, sim, cache_dir, graph, attached, poses,
                                         objects, coms, masses, progress)
     if params.faithful.enabled and params.settle and params.faithful.joint_frames > 0:
-        _joint_check(_with_attached(scene.with_poses(poses), attached, masses), proxies, sim, cache_dir,
+        _joint_check(_as_grounded(scene.with_poses(poses), attached, masses), proxies, sim, cache_dir,
                      params.faithful, objects)
     unsettled = [o for o, r in objects.items() if r["settled"] is False]
     summary = {"objects": len(order), "settled": sum(r["settled"] is True for r in objects.values()),
@@ -283,7 +283,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     summary["attached"] = sorted(attached)
     record = {"format": LOG_FORMAT, "order": order, "appended": appended, "params": params.to_dict(),
               "sim": sim.to_dict(), "objects": objects, "summary": summary}
-    return _with_attached(scene.with_poses(poses), attached, masses), record
+    return _as_grounded(scene.with_poses(poses), attached, masses), record
 
 
 def _flush_attached(scene: Scene, oid: str, obj, proxy: Proxy | None, holder: str, max_angle_deg: float,
@@ -741,9 +741,9 @@ def _keep_mass(masses: dict[str, np.ndarray], oid: str, rec: dict, given: np.nda
         masses.pop(oid, None)
 
 
-def _with_attached(scene: Scene, attached: dict[str, str], masses: dict[str, np.ndarray] | None = None) -> Scene:
-    """``scene`` with the attachments of ``attached`` (id -> what holds it) and the declared centres of mass of
-    ``masses`` (id -> (3,) local, remedy ``ballast``) set on its objects."""
+def _as_grounded(scene: Scene, attached: dict[str, str], masses: dict[str, np.ndarray] | None = None) -> Scene:
+    """``scene`` with what grounding knows of its objects' bodies set on them: the attachments of ``attached``
+    (id -> what holds it) and the declared centres of mass of ``masses`` (id -> (3,) local, remedy ``ballast``)."""
     for o in scene.objects:
         if o.id in attached:
             o.attached = attached[o.id]
@@ -854,7 +854,7 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
                 cert["touching"] = rec.get("touching", cert["touching"])
     if not kept:
         return poses
-    return _joint_settle(_with_attached(scene.with_poses(poses), attached, masses), proxies, sim, cache_dir, fp,
+    return _joint_settle(_as_grounded(scene.with_poses(poses), attached, masses), proxies, sim, cache_dir, fp,
                          params.settle_params, objects, coms, {o: np.asarray(scene.get(o).pose, float) for o in order})
 
 
