@@ -206,7 +206,8 @@ class FaithfulParams(Params):
         centre of mass rather than straight down (:func:`ray_corrected`): a monocular reconstruction errs mostly
         in depth, and an object put too far from the camera also floats (the camera looks down). Off by default:
         on ``clutter`` it lowers the translation error against ground truth and raises the rotation error a
-        little, on the real scenes it changes little (README, "Along the camera ray").
+        little, on ``contact`` (errors in every direction alike) it raises the translation error, on the real
+        scenes it changes little (README, "Along the camera ray").
     ray_share
         Share of the gap closed along the ray (the rest straight down, as without ``ray``). The gap is not all
         depth error: the levelling, the floor height, scale and hidden-side errors move an object's bottom too,
