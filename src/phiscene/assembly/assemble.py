@@ -306,13 +306,17 @@ def _flush_attached(scene: Scene, oid: str, obj, proxy: Proxy | None, holder: st
     return out
 
 
+def _shape_points(proxy: Proxy | None, mesh) -> np.ndarray:
+    """The vertices (n, 3), local, of an object's collision shape: its convex pieces', else its mesh's."""
+    return np.vstack(proxy.hulls) if proxy is not None and proxy.hulls else np.asarray(mesh.vertices)
+
+
 def _flushed_on(plane, obj, proxy: Proxy | None, pose: np.ndarray, max_angle_deg: float, cache_dir: Path,
                 rec: dict) -> np.ndarray:
     """``pose`` made flush with ``plane`` (:func:`~phiscene.assembly.faithful.flush_attached`); fills ``rec``."""
     import trimesh
 
-    points = np.vstack(proxy.hulls) if proxy is not None and proxy.hulls else np.asarray(obj.mesh().vertices)
-    hull = trimesh.convex.convex_hull(points)
+    hull = trimesh.convex.convex_hull(_shape_points(proxy, obj.mesh()))
     normals = _resting_normals(hull.vertices, cache_dir)
     out, angle, shift = fa.flush_attached(pose, normals, np.asarray(hull.center_mass), hull.vertices,
                                           np.asarray(plane.normal, dtype=float), plane.offset, plane.kind == "wall",
@@ -461,7 +465,7 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
     below = [e.source for e in edges if e.relation in fa.BELOW] or (["ground"] if not edges else [])
     mesh = obj.mesh()
     _, _, scale = decompose(obj.pose)
-    points = np.vstack(proxy.hulls) if proxy is not None and proxy.hulls else np.asarray(mesh.vertices)
+    points = _shape_points(proxy, mesh)
     hull = trimesh.convex.convex_hull(points)
     com = np.asarray(hull.center_mass, dtype=float)
     parents_world = {}
@@ -539,7 +543,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
     """
     from phiscene.inertia import rigid_props
 
-    props = rigid_props(mesh, proxy.hulls, sim.density, decompose(pose)[2], com)
+    scale = decompose(pose)[2]
+    props = rigid_props(mesh, proxy.hulls, sim.density, scale, com)
     world.add_body(oid, proxy.hulls, pose, props)
     context = [b for b in world.bodies if b != oid]
 
@@ -547,7 +552,6 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         return sorted(world.distances(oid, context, fp.contact_tol))
 
     tried: list[dict] = []
-    scale = decompose(pose)[2]
     own = props.com / scale  # its centre of mass as it came (local, unscaled)
     body = {"com": com}  # the centre of mass the body in the world has (declared, local; None: uniform)
 
@@ -629,7 +633,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
             # is 31 cm away) is nearer to the input than that
             here = pose.copy()
             here[:3, 3] += fa.com_world(info["input"], info["com"]) - fa.com_world(pose, info["com"])
-            points = transform_points(here, np.vstack(proxy.hulls))
+            points = transform_points(here, info["points"])
             went = [t["travel"] for t in tried if math.isfinite(t["travel"])]
             reach = max(fp.onto_reach, min(went)) if went else fp.onto_reach
             onto = fa.onto_start(here, info["com"], points, info["surfaces"](info["placed"]), reach,
@@ -639,7 +643,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         if fp.ballast and not any(t["ok"] for t in tried) and all(
                 t["turned"] > fp.max_turn or not t["result"].settled or not t["robust"] for t in tried):
             # none came to rest level: at rest in the photo, so not a uniform solid (flowers outweighing a vase)
-            points = np.vstack(proxy.hulls)
+            points = info["points"]  # its convex pieces' vertices (local)
             declared = fa.ballast_com(pose, own, points, fp.ballast_height)
             start = pose
             if declared is not None and fp.flush and info["flushable"]:
