@@ -12,12 +12,13 @@ from phiscene.meshes import save_mesh
 from phiscene.metrics.drift import drift_mujoco
 from phiscene.metrics.physical import PhysicalParams, physical_metrics
 from phiscene.proxies import ProxyParams, scene_proxies
-from phiscene.scene import Scene, SceneObject
+from phiscene.scene import Plane, Scene, SceneObject
 from phiscene.sim.settings import SimSettings
 from phiscene.topology.attached import (
     AttachedParams,
     attached_ids,
     attached_objects,
+    is_fragment,
     names_fixture,
     panel_normal,
     says_mounted,
@@ -139,6 +140,40 @@ def test_poster_stays_put_and_is_left_out_of_drift(room):
     assert phys["drift_trans"] == pytest.approx(float(np.mean(free)))
     mj = drift_mujoco(out, proxies, PhysicalParams(samples=256), SIM)
     assert mj["objects"]["lamp"]["attached"] == "ground" and mj["drift_trans"] < 0.01
+
+
+def test_fragments_of_floor_furniture_are_kept_where_they_are(tmp_path):
+    """The visible top of a chair behind a table and a cabinet cut off by the photo's frame float higher above the
+    floor than they are tall: each is a fragment whose unseen part stands on the ground (reason ``partial``, held
+    by the ground, not the wall beside it). A whole chair lifted by less than its height, a fragment-sized box
+    that is not furniture, and a chair fragment only 20 cm up are grounded as usual."""
+    boxes = {"back": (0.4, 0.1, 0.15), "cabinet": (0.4, 0.4, 0.2), "laptop": (0.3, 0.2, 0.02),
+             "chair": (0.45, 0.45, 0.85), "box": (0.3, 0.3, 0.15), "low": (0.4, 0.1, 0.15)}
+    mesh = {n: save_mesh(trimesh.creation.box(s), tmp_path / f"{n}.obj") for n, s in boxes.items()}
+    scene = Scene([
+        SceneObject("back", mesh["back"], make_pose(translation=[0, 0, 0.40 + 0.075]), "wooden chair in the back"),
+        SceneObject("cabinet", mesh["cabinet"], make_pose(translation=[1.5, 0.78, 0.35 + 0.1]),
+                    "wooden cabinet partially visible in the bottom left"),
+        SceneObject("laptop", mesh["laptop"], make_pose(translation=[1.5, 0.78, 0.56]), "black laptop on the cabinet"),
+        SceneObject("chair", mesh["chair"], make_pose(translation=[-1.5, 0, 0.35 + 0.425]), "wooden chair"),
+        SceneObject("box", mesh["box"], make_pose(translation=[3.0, 0, 0.40 + 0.075]), "cardboard box"),
+        SceneObject("low", mesh["low"], make_pose(translation=[-3.0, 0, 0.20 + 0.075]), "chair in the front"),
+    ], structure=[Plane("wall", "wall", (0.0, -1.0, 0.0), 1.0)])  # the wall y = 1, 2 cm behind the cabinet
+    decided = attached_objects(scene)
+    assert decided == {"back": "partial", "cabinet": "partial"}
+    assert is_fragment("chair", 0.4, 0.55, 0.0, 0.3) and not is_fragment("chair", 0.4, 0.85, 0.0, 0.3)
+    assert not attached_objects(scene, AttachedParams(partial=False))
+    g = topology.infer(scene, "geometric", {})
+    assert attached_ids(g, holders=True) == {"back": "ground", "cabinet": "ground"}
+    assert g.parents("laptop") == ["cabinet"]
+    proxies = scene_proxies(scene, ProxyParams(backend="convex"), tmp_path / "cache")
+    fixed = attached_ids(g, holders=True)
+    out, _ = ground_scene(scene, g.order, proxies, AssemblyParams(), SIM, tmp_path / "cache", attached=fixed)
+    for oid in fixed:
+        np.testing.assert_array_equal(out.get(oid).pose, scene.get(oid).pose)
+    # the laptop stays on the cabinet (within the contact clearance), the whole chair lands on the floor
+    assert out.get("laptop").world_mesh().bounds[0, 2] == pytest.approx(0.55, abs=0.005)
+    assert out.get("chair").world_mesh().bounds[0, 2] == pytest.approx(0.0, abs=0.005)
 
 
 def test_an_attached_curtain_through_the_floor_does_not_lower_the_drift_ground(tmp_path):

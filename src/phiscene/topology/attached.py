@@ -11,6 +11,12 @@ its footprint):
 
 * description: a wall or ceiling object (:data:`WALL_WORDS`, e.g. "poster", "painting", "curtain",
   "whiteboard", "ceiling fan") or an explicit "on the wall" / "hanging" phrase (:data:`MOUNT_PHRASES`);
+* partial furniture: floor furniture (a chair, a cabinet: :func:`~phiscene.topology.floor.names_furniture`)
+  whose bottom is at least ``min_height`` above the ground and higher above it than the object is tall
+  (``partial``). Such a mesh is a fragment: the part of a chair seen over a table, a cabinet cut off by the frame
+  of the photo. Its unseen lower part stands on the ground and holds it where it is. Dropping the fragment would
+  put a chair's back on the floor. A whole piece of furniture lifted by a depth error rises less than its own
+  height, so it is still grounded;
 * geometry: a thin vertical panel (:func:`panel_normal`: the smallest extent of its minimum-volume oriented box
   <= ``thin_ratio`` times the largest, its thin axis within 30 degrees of horizontal, so a poster on a wall at any
   heading counts) whose bottom is at least ``min_height`` above the ground, or anything whose top is within
@@ -49,6 +55,8 @@ MOUNT_PHRASES = ("on the wall", "on wall", "wall mounted", "wall-mounted", "moun
                  "on the ceiling", "from the ceiling", "ceiling")
 #: Relation name of an attachment edge.
 ATTACHED = "attached"
+#: Reason of an attachment that keeps a fragment of floor furniture in place (:func:`is_fragment`).
+PARTIAL = "partial"
 #: A panel's thin axis is at most this far (deg) from horizontal (:func:`panel_normal`).
 PANEL_TILT_DEG = 30.0
 
@@ -76,6 +84,9 @@ class AttachedParams(Params):
     wall_distance
         An attached object within this distance (m) of a wall or ceiling plane of the scene is fixed to that
         plane (its ``attached`` edge comes from the plane's id), otherwise to the ground node.
+    partial
+        Keep fragments of floor furniture where they are (reason ``partial``, module docstring); they are held
+        by the ground.
     """
 
     _label = "attachment parameters"
@@ -88,6 +99,7 @@ class AttachedParams(Params):
     room_height: float = 2.0
     samples: int = 64
     wall_distance: float = 0.05
+    partial: bool = True
 
     def check(self) -> None:
         """Non-negative distances, a ratio in (0, 1), at least 4 samples (``ValueError``)."""
@@ -186,8 +198,19 @@ def _text(obj) -> str:
     return obj.description or obj.id.replace("_", " ")
 
 
+def is_fragment(description: str, bottom: float, top: float, ground: float, min_height: float) -> bool:
+    """Whether an object is a fragment of floor furniture (module docstring, reason ``partial``): its description
+    names floor furniture and its bottom (m) is at least ``min_height`` above the ``ground`` height and higher
+    above it than the object is tall (``top - bottom``)."""
+    from phiscene.topology.floor import names_furniture  # floor.py reads descriptions with this module's helpers
+
+    gap = bottom - ground
+    return gap >= min_height and gap > top - bottom and names_furniture(description)
+
+
 def attached_objects(scene, params: AttachedParams = AttachedParams()) -> dict[str, str]:
-    """Objects decided attached (module docstring) -> why (``fixture``, ``description``, ``panel`` or ``ceiling``).
+    """Objects decided attached (module docstring) -> why (``fixture``, ``description``, ``partial``, ``panel`` or
+    ``ceiling``).
 
     Objects already marked :attr:`~phiscene.scene.SceneObject.attached` in the scene are kept (reason ``given``).
     """
@@ -213,7 +236,8 @@ def attached_objects(scene, params: AttachedParams = AttachedParams()) -> dict[s
         if lo[2] - ground < params.min_height:
             continue
         ceiling = room and top - hi[2] <= params.ceiling_gap
-        why = "description" if says_mounted(_text(o)) else \
+        fragment = params.partial and is_fragment(_text(o), lo[2], hi[2], ground, params.min_height)
+        why = "description" if says_mounted(_text(o)) else PARTIAL if fragment else \
             "panel" if panel_normal(m, params.thin_ratio) is not None else "ceiling" if ceiling else None
         if why is None or _held_from_below(scene, o.id, world, ground, params, holds_nothing):
             continue
@@ -247,8 +271,12 @@ def mark_attached(scene, graph: SupportGraph, params: AttachedParams = AttachedP
     if not decided:
         return replace(graph, meta={**graph.meta, "attached": {}})
     edges = [e for e in graph.edges if e.target not in decided]
-    holders = {oid: holder(scene, oid, params.wall_distance) for oid in decided}
-    edges += [SupportEdge(holders[oid], oid, ATTACHED, 1.0, f"fixed to a wall or the ceiling ({why})")
+    # a fragment stands on the ground through its unseen part, whatever wall is near it
+    holders = {oid: GROUND if why == PARTIAL else holder(scene, oid, params.wall_distance)
+               for oid, why in decided.items()}
+    edges += [SupportEdge(holders[oid], oid, ATTACHED, 1.0,
+                          "a fragment: its unseen lower part stands on the ground (partial)" if why == PARTIAL
+                          else f"fixed to a wall or the ceiling ({why})")
               for oid, why in decided.items()]
     planes = [p.id for p in scene.structure if p.id in holders.values() or p.id in graph.structure]
     return replace(graph, edges=edges, meta={**graph.meta, "attached": decided}, structure=planes)

@@ -90,6 +90,9 @@ This includes any contact that contributes to an object's physical support or st
   assume it rests on the ground and add a ground -> object edge with low confidence.
 - An object fixed to a wall or the ceiling (a poster, painting, window, curtain, whiteboard, wall clock,
   ceiling fan, hanging lamp) is not supported from below: add one ground -> object edge with relation "attached".
+- A visible fragment of a larger object whose lower part is hidden (the top of a chair seen behind a table, a
+  cabinet cut off by the image border) stands on the ground through its hidden part: add one ground -> object
+  edge with relation "attached".
 
 Return strict JSON with this schema:
 {
