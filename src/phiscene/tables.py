@@ -49,7 +49,9 @@ REAL_COLUMNS = {"pen_depth": "min", "float_dist": "min", "drift_trans": "min", "
 REAL_EXTRA = ["attached", "ballasted", "settled_frac", "seconds"]
 #: Footnote of tables whose drift leaves attached objects out.
 ATTACHED_NOTE = ("Objects attached to a wall, the ceiling or the ground (``attached``) are static: they are "
-                 "colliders for the others and are left out of the drift, floating and displacement averages. "
+                 "colliders for the others and are left out of the drift and floating averages. The displacement "
+                 "and rotation averages count every object of the input (an attached object with the motion the "
+                 "method gives it: none for phi_scene), so that every method is averaged over the same objects. "
                  "Objects with a declared centre of mass (``ballasted``: grounding's remedy ``ballast``, for an "
                  "object at rest in the input that topples as a uniform solid) are simulated with it in both "
                  "simulators.")

@@ -1,6 +1,7 @@
 """Faithfulness of a grounded scene to its input, and pose error against ground truth.
 
-Per scene, over the free (non-attached) objects:
+Per scene, over the objects the input does not mark attached (objects a method's own topology decides are
+attached count, with the motion the method gives them, so that every method is averaged over the same objects):
 
 * displacement: distance (m) between each object's centre (its local
   bounding-box centre under its pose) in the scene and in the input;
