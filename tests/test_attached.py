@@ -18,6 +18,7 @@ from phiscene.topology.attached import (
     AttachedParams,
     attached_ids,
     attached_objects,
+    head_words,
     is_fragment,
     names_fixture,
     panel_normal,
@@ -49,6 +50,12 @@ def room(tmp_path_factory):
 def test_descriptions():
     assert says_mounted("paper poster on the back wall") and says_mounted("brown ceiling fan")
     assert says_mounted("white curtain") and not says_mounted("wooden chair") and not says_mounted("red book")
+
+
+def test_the_head_of_a_description_ends_at_its_first_preposition():
+    assert head_words("wooden chair partially visible behind foreground table (left)") == [
+        "wooden", "chair", "partially", "visible"]
+    assert head_words("white curtains on left window") == ["white", "curtains"]
 
 
 def test_fixture_names_are_read_from_the_head_of_the_description():
@@ -145,10 +152,11 @@ def test_poster_stays_put_and_is_left_out_of_drift(room):
 def test_fragments_of_floor_furniture_are_kept_where_they_are(tmp_path):
     """The visible top of a chair behind a table and a cabinet cut off by the photo's frame float higher above the
     floor than they are tall: each is a fragment whose unseen part stands on the ground (reason ``partial``, held
-    by the ground, not the wall beside it). A whole chair lifted by less than its height, a fragment-sized box
-    that is not furniture, and a chair fragment only 20 cm up are grounded as usual."""
+    by the ground, not the wall beside it). So is a chair 18 cm up whose description says it is seen only in part;
+    the same chair described as a whole, a whole chair lifted by less than its height, a fragment-sized box that is
+    not furniture, and a chair fragment only 20 cm up are grounded as usual."""
     boxes = {"back": (0.4, 0.1, 0.15), "cabinet": (0.4, 0.4, 0.2), "laptop": (0.3, 0.2, 0.02),
-             "chair": (0.45, 0.45, 0.85), "box": (0.3, 0.3, 0.15), "low": (0.4, 0.1, 0.15)}
+             "chair": (0.45, 0.45, 0.85), "box": (0.3, 0.3, 0.15), "low": (0.4, 0.1, 0.15), "seat": (0.4, 0.4, 0.25)}
     mesh = {n: save_mesh(trimesh.creation.box(s), tmp_path / f"{n}.obj") for n, s in boxes.items()}
     scene = Scene([
         SceneObject("back", mesh["back"], make_pose(translation=[0, 0, 0.40 + 0.075]), "wooden chair in the back"),
@@ -158,13 +166,19 @@ def test_fragments_of_floor_furniture_are_kept_where_they_are(tmp_path):
         SceneObject("chair", mesh["chair"], make_pose(translation=[-1.5, 0, 0.35 + 0.425]), "wooden chair"),
         SceneObject("box", mesh["box"], make_pose(translation=[3.0, 0, 0.40 + 0.075]), "cardboard box"),
         SceneObject("low", mesh["low"], make_pose(translation=[-3.0, 0, 0.20 + 0.075]), "chair in the front"),
+        # 18 cm up and taller than that: a fragment only because its description says it is seen in part
+        SceneObject("seen", mesh["seat"], make_pose(translation=[0, 3.0, 0.18 + 0.125]),
+                    "wooden chair partially visible behind the table (left)"),
+        SceneObject("whole", mesh["seat"], make_pose(translation=[0, -3.0, 0.18 + 0.125]), "wooden chair (left)"),
     ], structure=[Plane("wall", "wall", (0.0, -1.0, 0.0), 1.0)])  # the wall y = 1, 2 cm behind the cabinet
     decided = attached_objects(scene)
-    assert decided == {"back": "partial", "cabinet": "partial"}
-    assert is_fragment("chair", 0.4, 0.55, 0.0, 0.3) and not is_fragment("chair", 0.4, 0.85, 0.0, 0.3)
+    assert decided == {"back": "partial", "cabinet": "partial", "seen": "partial"}
+    params = AttachedParams()
+    assert is_fragment("chair", 0.4, 0.55, 0.0, params) and not is_fragment("chair", 0.4, 0.85, 0.0, params)
+    assert not is_fragment("chair partially visible", 0.05, 0.5, 0.0, params)  # within partial_gap: grounded
     assert not attached_objects(scene, AttachedParams(partial=False))
     g = topology.infer(scene, "geometric", {})
-    assert attached_ids(g, holders=True) == {"back": "ground", "cabinet": "ground"}
+    assert attached_ids(g, holders=True) == {"back": "ground", "cabinet": "ground", "seen": "ground"}
     assert g.parents("laptop") == ["cabinet"]
     proxies = scene_proxies(scene, ProxyParams(backend="convex"), tmp_path / "cache")
     fixed = attached_ids(g, holders=True)

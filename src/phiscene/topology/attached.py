@@ -12,11 +12,12 @@ its footprint):
 * description: a wall or ceiling object (:data:`WALL_WORDS`, e.g. "poster", "painting", "curtain",
   "whiteboard", "ceiling fan") or an explicit "on the wall" / "hanging" phrase (:data:`MOUNT_PHRASES`);
 * partial furniture: floor furniture (a chair, a cabinet: :func:`~phiscene.topology.floor.names_furniture`)
-  whose bottom is at least ``min_height`` above the ground and higher above it than the object is tall
-  (``partial``). Such a mesh is a fragment: the part of a chair seen over a table, a cabinet cut off by the frame
-  of the photo. Its unseen lower part stands on the ground and holds it where it is. Dropping the fragment would
-  put a chair's back on the floor. A whole piece of furniture lifted by a depth error rises less than its own
-  height, so it is still grounded;
+  whose bottom is at least ``min_height`` above the ground and higher above it than the object is tall, or at
+  least ``partial_gap`` above it when its description says it is seen only in part ("partially visible",
+  "occluded", "cut off": :data:`PARTIAL_WORDS`) (``partial``). Such a mesh is a fragment: the part of a chair
+  seen over a table, a cabinet cut off by the frame of the photo. Its unseen lower part stands on the ground and
+  holds it where it is. Dropping the fragment would put a chair's back on the floor, where it cannot stand. A whole
+  piece of furniture lifted by a depth error rises less than its own height, so it is still grounded;
 * geometry: a thin vertical panel (:func:`panel_normal`: the smallest extent of its minimum-volume oriented box
   <= ``thin_ratio`` times the largest, its thin axis within 30 degrees of horizontal, so a poster on a wall at any
   heading counts) whose bottom is at least ``min_height`` above the ground, or anything whose top is within
@@ -49,12 +50,15 @@ WALL_WORDS = ("poster", "painting", "picture", "artwork", "art", "framed", "wind
 #: Words naming building fixtures: attached wherever they reach (module docstring).
 FIXTURE_WORDS = ("window", "windows", "curtain", "curtains", "drape", "drapes", "blind", "blinds")
 #: Prepositions that end a description's head ("<head> on the <supporter>").
-HEAD_END = ("on", "under", "in", "at", "by", "near", "beside", "above", "below", "next", "with", "over", "against")
+HEAD_END = ("on", "under", "in", "at", "by", "near", "beside", "above", "below", "next", "with", "over", "against",
+            "behind", "between", "beneath", "underneath", "inside", "atop", "along", "across", "around")
 #: Phrases saying an object is mounted (matched in the lower-case description).
 MOUNT_PHRASES = ("on the wall", "on wall", "wall mounted", "wall-mounted", "mounted", "hanging", "hung",
                  "on the ceiling", "from the ceiling", "ceiling")
 #: Relation name of an attachment edge.
 ATTACHED = "attached"
+#: Words saying an object is seen only in part (its lower part may be missing from the reconstruction).
+PARTIAL_WORDS = ("partially", "partly", "partial", "occluded", "truncated", "cropped", "cut")
 #: Reason of an attachment that keeps a fragment of floor furniture in place (:func:`is_fragment`).
 PARTIAL = "partial"
 #: A panel's thin axis is at most this far (deg) from horizontal (:func:`panel_normal`).
@@ -87,6 +91,9 @@ class AttachedParams(Params):
     partial
         Keep fragments of floor furniture where they are (reason ``partial``, module docstring); they are held
         by the ground.
+    partial_gap
+        Floor furniture whose description says it is seen only in part is a fragment when its bottom is at least
+        this high (m) above the ground: beyond the vertical gaps that depth errors leave under whole furniture.
     """
 
     _label = "attachment parameters"
@@ -100,10 +107,12 @@ class AttachedParams(Params):
     samples: int = 64
     wall_distance: float = 0.05
     partial: bool = True
+    partial_gap: float = 0.1
 
     def check(self) -> None:
         """Non-negative distances, a ratio in (0, 1), at least 4 samples (``ValueError``)."""
-        if min(self.support_gap, self.min_height, self.ceiling_gap, self.room_height, self.wall_distance) < 0:
+        if min(self.support_gap, self.min_height, self.ceiling_gap, self.room_height, self.wall_distance,
+               self.partial_gap) < 0:
             raise ValueError("attachment distances must be >= 0")
         if not 0 < self.thin_ratio < 1 or self.samples < 4:
             raise ValueError("attachment 'thin_ratio' must be in (0, 1) and 'samples' >= 4")
@@ -198,14 +207,23 @@ def _text(obj) -> str:
     return obj.description or obj.id.replace("_", " ")
 
 
-def is_fragment(description: str, bottom: float, top: float, ground: float, min_height: float) -> bool:
-    """Whether an object is a fragment of floor furniture (module docstring, reason ``partial``): its description
-    names floor furniture and its bottom (m) is at least ``min_height`` above the ``ground`` height and higher
-    above it than the object is tall (``top - bottom``)."""
+def says_partial(description: str) -> bool:
+    """Whether a description says the object is seen only in part (a word of :data:`PARTIAL_WORDS`)."""
+    return bool(set(re.findall(r"[a-z]+", description.lower())) & set(PARTIAL_WORDS))
+
+
+def is_fragment(description: str, bottom: float, top: float, ground: float, params: "AttachedParams") -> bool:
+    """Whether an object is a fragment of floor furniture (module docstring, reason ``partial``).
+
+    Its description names floor furniture, and its bottom (m) is at least ``params.min_height`` above the
+    ``ground`` height and higher above it than the object is tall (``top - bottom``), or at least
+    ``params.partial_gap`` above it when the description says it is seen only in part (:func:`says_partial`).
+    """
     from phiscene.topology.floor import names_furniture  # floor.py reads descriptions with this module's helpers
 
     gap = bottom - ground
-    return gap >= min_height and gap > top - bottom and names_furniture(description)
+    high = gap >= params.min_height and gap > top - bottom
+    return (high or (gap >= params.partial_gap and says_partial(description))) and names_furniture(description)
 
 
 def attached_objects(scene, params: AttachedParams = AttachedParams()) -> dict[str, str]:
@@ -233,12 +251,13 @@ def attached_objects(scene, params: AttachedParams = AttachedParams()) -> dict[s
             continue
         m = world[o.id]
         lo, hi = m.bounds
+        fragment = params.partial and is_fragment(_text(o), lo[2], hi[2], ground, params)
         if lo[2] - ground < params.min_height:
-            continue
-        ceiling = room and top - hi[2] <= params.ceiling_gap
-        fragment = params.partial and is_fragment(_text(o), lo[2], hi[2], ground, params.min_height)
-        why = "description" if says_mounted(_text(o)) else PARTIAL if fragment else \
-            "panel" if panel_normal(m, params.thin_ratio) is not None else "ceiling" if ceiling else None
+            why = PARTIAL if fragment else None  # low: only a fragment the description calls partial
+        else:
+            ceiling = room and top - hi[2] <= params.ceiling_gap
+            why = "description" if says_mounted(_text(o)) else PARTIAL if fragment else \
+                "panel" if panel_normal(m, params.thin_ratio) is not None else "ceiling" if ceiling else None
         if why is None or _held_from_below(scene, o.id, world, ground, params, holds_nothing):
             continue
         out[o.id] = why
