@@ -263,7 +263,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                               {o: np.asarray(scene.get(o).pose, float) for o in order})
         if params.faithful.reground:
             poses = _reground_collapsed(scene, order, proxies, params, sim, cache_dir, graph, attached, poses,
-                                        objects, coms, masses, progress)
+                                        objects, coms, masses, progress, eye)
     if params.faithful.enabled and params.settle and params.faithful.joint_frames > 0:
         _joint_check(_as_grounded(scene.with_poses(poses), attached, masses), proxies, sim, cache_dir,
                      params.faithful, objects)
@@ -803,13 +803,15 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
                         sim: SimSettings, cache_dir: Path, graph, attached: dict[str, str],
                         poses: dict[str, np.ndarray], objects: dict[str, dict], coms: dict[str, np.ndarray],
                         masses: dict[str, np.ndarray],
-                        progress: Callable[[str], None] | None) -> dict[str, np.ndarray]:
+                        progress: Callable[[str], None] | None,
+                        eye: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Ground again, from its input, each object that joint settling toppled or dropped, against the rest of the
     scene where joint settling left it; then settle the scene jointly once more.
 
     Sequential settling tests an object on supporters frozen where they were placed; released together, the
     supporters may shift under its load (a mug across two boxes that part) and it falls. Its own placement is
-    then redone with the same stages (carried, flush, SDF, guarded settling) on the supporters as they now rest;
+    then redone with the same stages (carried, along the camera ray from ``eye`` when remedy ``ray`` is on, flush,
+    SDF, guarded settling) on the supporters as they now rest;
     the new pose replaces the collapsed one when it is closer to the input (:func:`~phiscene.assembly.faithful.
     closeness`). The record gets ``reground`` (the new attempt's settling record and whether it was kept) and the
     certificate's remedy a ``+reground``.
@@ -833,7 +835,7 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
             for q, p in context.items():
                 _add_static(world, q, scene.get(q).mesh(), proxies[q], p, sim, masses.get(q))
             pose, info = _faithful_start(scene, oid, proxies[oid], graph, context, {}, {}, attached, fp, pp.seed,
-                                         cache_dir, rec)
+                                         cache_dir, rec, eye)
             if params.penetration:
                 placed = [sdf_body(q, scene.get(q).mesh(), p, pp.n_context, pp, cache_dir) for q, p in context.items()]
                 planar = _on_the_floor(obj.mesh(), pose, info, scene.ground_height, fp.planar_floor)
