@@ -60,12 +60,14 @@ def test_the_head_of_a_description_ends_at_its_first_preposition():
 
 def test_fixture_names_are_read_from_the_head_of_the_description():
     assert names_fixture("white curtains on left window") and names_fixture("window_in_middle".replace("_", " "))
-    assert not names_fixture("plant on the window sill") and not names_fixture("radiator under middle window")
+    assert not names_fixture("plant on the window sill") and not names_fixture("bench under middle window")
+    assert names_fixture("white radiator under middle window")  # on its wall brackets, part of the building
     assert not names_fixture("wooden chair")
 
 
 def test_a_window_over_a_radiator_and_a_floor_length_curtain_are_attached(tmp_path):
-    """Fixtures are attached whatever stands under them; a plant on the sill under the same window stays free."""
+    """Fixtures (the window, the radiator under it, a floor-length curtain) are attached whatever stands under them;
+    a plant on the sill under the same window stays free."""
     boxes = {"radiator": (0.8, 0.1, 0.5), "window": (0.8, 0.05, 1.0), "curtain": (0.4, 0.05, 2.2),
              "plant": (0.15, 0.15, 0.2)}
     mesh = {n: save_mesh(trimesh.creation.box(s), tmp_path / f"{n}.obj") for n, s in boxes.items()}
@@ -76,7 +78,7 @@ def test_a_window_over_a_radiator_and_a_floor_length_curtain_are_attached(tmp_pa
         SceneObject("plant", mesh["plant"], make_pose(translation=[0.2, -0.1, 0.6]), "plant on the window sill"),
     ])
     decided = attached_objects(scene)
-    assert decided == {"window": "fixture", "curtain": "fixture"}
+    assert decided == {"window": "fixture", "curtain": "fixture", "radiator": "fixture"}
 
 
 def test_panel_at_any_heading_and_not_a_board_lying_flat():

@@ -27,8 +27,9 @@ its footprint):
 Objects resting on something stay free whatever their description says (a painting standing on a dresser); a
 wall object other than a fixture holds nothing from below (posters overlapping on a wall do not hold each other
 up); except
-building fixtures (:data:`FIXTURE_WORDS`: windows, curtains, blinds), which are part of the room wherever they reach:
-a window above a radiator or a floor-length curtain is attached whatever is under it and however low it starts. The
+building fixtures (:data:`FIXTURE_WORDS`: windows, curtains, blinds, radiators), which are part of the room wherever
+they reach: a window above a radiator, a floor-length curtain or a radiator on its wall brackets a hand's width above
+the floor is attached whatever is under it and however low it starts. The
 fixture word must name the object itself, in the description's head before its first preposition ("white curtains
 on the left window" is a fixture, "plant on the window sill" is not).
 """
@@ -48,7 +49,8 @@ WALL_WORDS = ("poster", "painting", "picture", "artwork", "art", "framed", "wind
               "blind", "blinds", "whiteboard", "blackboard", "chalkboard", "clock", "mirror", "fan", "chandelier",
               "sconce", "pendant", "canvas", "print", "photo", "photograph", "calendar", "board", "tapestry")
 #: Words naming building fixtures: attached wherever they reach (module docstring).
-FIXTURE_WORDS = ("window", "windows", "curtain", "curtains", "drape", "drapes", "blind", "blinds")
+FIXTURE_WORDS = ("window", "windows", "curtain", "curtains", "drape", "drapes", "blind", "blinds", "radiator",
+                 "radiators")
 #: Prepositions that end a description's head ("<head> on the <supporter>").
 HEAD_END = ("on", "under", "in", "at", "by", "near", "beside", "above", "below", "next", "with", "over", "against",
             "behind", "between", "beneath", "underneath", "inside", "atop", "along", "across", "around")
