@@ -214,7 +214,7 @@ def says_partial(description: str) -> bool:
     return bool(set(re.findall(r"[a-z]+", description.lower())) & set(PARTIAL_WORDS))
 
 
-def is_fragment(description: str, bottom: float, top: float, ground: float, params: "AttachedParams") -> bool:
+def is_fragment(description: str, bottom: float, top: float, ground: float, params: AttachedParams) -> bool:
     """Whether an object is a fragment of floor furniture (module docstring, reason ``partial``).
 
     Its description names floor furniture, and its bottom (m) is at least ``params.min_height`` above the
@@ -285,8 +285,9 @@ def mark_attached(scene, graph: SupportGraph, params: AttachedParams = AttachedP
 
     The holder (:func:`holder`) is the wall or ceiling plane it is fixed to when the scene has structure planes
     (the plane becomes a ``structure`` node of the graph), else the ground node, which then stands for the fixed
-    world. Edges out of an attached object (what it carries, e.g. a wall shelf) are kept. The decision is
-    recorded in ``graph.meta["attached"]`` (id -> reason).
+    world; a fragment of furniture (reason ``partial``) is always held by the ground node, whatever wall is near
+    it. Edges out of an attached object (what it carries, e.g. a wall shelf, the laptop on a cabinet fragment) are
+    kept. The decision is recorded in ``graph.meta["attached"]`` (id -> reason).
     """
     decided = attached_objects(scene, params)
     if not decided:
