@@ -621,14 +621,14 @@ def _under(points: np.ndarray, supporters: dict, ground_height: float, band: flo
     low = pts[pts[:, 2] <= lo + band * max(hi - lo, 1e-9)]
     if len(low) > max_points:
         low = low[np.linspace(0, len(low) - 1, max_points).astype(int)]
+    origins = low + np.array([0.0, 0.0, reach])
+    dirs = np.tile([0.0, 0.0, -1.0], (len(low), 1))
     gaps, held = [], centre is None
     for mesh in supporters.values():
         if mesh is None:
             gaps.append(lo - ground_height)
             held = True
             continue
-        origins = low + np.array([0.0, 0.0, reach])
-        dirs = np.tile([0.0, 0.0, -1.0], (len(low), 1))
         hits, rays, _ = mesh.ray.intersects_location(origins, dirs, multiple_hits=False)
         if len(hits):
             gaps.append(float(np.min(low[rays, 2] - hits[:, 2])))

@@ -120,9 +120,14 @@ class AttachedParams(Params):
             raise ValueError("attachment 'thin_ratio' must be in (0, 1) and 'samples' >= 4")
 
 
+def _has_word(description: str, words: tuple[str, ...]) -> bool:
+    """Whether one of a description's lower-case words is in ``words``."""
+    return bool(set(re.findall(r"[a-z]+", description.lower())) & set(words))
+
+
 def names_wall_object(description: str) -> bool:
     """Whether a description names a wall or ceiling object (a word of :data:`WALL_WORDS`)."""
-    return bool(set(re.findall(r"[a-z]+", description.lower())) & set(WALL_WORDS))
+    return _has_word(description, WALL_WORDS)
 
 
 def says_mounted(description: str) -> bool:
@@ -211,7 +216,7 @@ def _text(obj) -> str:
 
 def says_partial(description: str) -> bool:
     """Whether a description says the object is seen only in part (a word of :data:`PARTIAL_WORDS`)."""
-    return bool(set(re.findall(r"[a-z]+", description.lower())) & set(PARTIAL_WORDS))
+    return _has_word(description, PARTIAL_WORDS)
 
 
 def is_fragment(description: str, bottom: float, top: float, ground: float, params: AttachedParams) -> bool:
