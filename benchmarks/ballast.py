@@ -1,11 +1,14 @@
-"""What the ``ballast`` remedy's declared centres of mass hold: each grounded scene that has one, released in the
-drift protocol (pybullet and MuJoCo) as written, then again with every object a uniform solid, from the same poses.
+"""What the ``ballast`` remedy's declared centres of mass and the ``base`` remedy's completed bases hold: each
+grounded scene that has one, released in the drift protocol (pybullet and MuJoCo) as written, then without the
+completed bases (when it has any), then with every object a uniform solid without a completed base, from the same
+poses.
 
 A declared centre (``com`` in ``scene.json``) is a modelling choice: an object at rest in the photo that topples as
 a uniform solid (a vase of flowers reconstructed as one solid) is given its mass low in its base, and every
 simulator, metric and export uses it. This shows, per scene, what that choice is worth: the drift with the
 declared centres (what the tables report) next to the drift without them, and the ballasted object that moves most
-without its centre.
+without its centre. A completed base (``base`` in ``scene.json``, one more convex piece under an object whose round
+bottom, a guess of its hidden side, cannot stand) is the same kind of choice, about shape.
 
 Usage::
 
@@ -48,26 +51,33 @@ def main(argv: list[str] | None = None) -> None:
     for d in sorted(p for p in root.iterdir() if (p / "scene.json").is_file()):
         scene = load_scene(d / "scene.json")
         ballasted = [o.id for o in scene.objects if o.com is not None]
-        if not ballasted:
+        based = [o.id for o in scene.objects if o.base is not None]
+        if not ballasted and not based:
             continue
         found += 1
         proxies = read_proxies(a.results / "proxies" / a.suite / f"{d.name}.npz")
         rows = {}
-        for label in ("declared", "uniform"):
-            if label == "uniform":
-                for o in scene.objects:
+        for label in ("declared", "no bases", "uniform"):
+            if label == "no bases" and not based:
+                continue
+            scene = load_scene(d / "scene.json")
+            for o in scene.objects:
+                if label != "declared":
+                    o.base = None
+                if label == "uniform":
                     o.com = None
             rows[label] = (drift_bullet(scene, proxies, phys, sim, a.cache_dir),
                            drift_mujoco(scene, proxies, phys, sim, mj))
-        (bd, md), (bu, mu) = rows["declared"], rows["uniform"]
-        worst = max(ballasted, key=lambda i: bu["objects"][i]["drift_trans"])
-        print(f"{d.name}: {len(ballasted)} ballasted; drift as declared pybullet {bd['drift_trans'] * 1000:.1f} mm / "
-              f"{bd['drift_rot']:.2f} deg, MuJoCo {md['drift_trans'] * 1000:.1f} mm / {md['drift_rot']:.2f} deg; "
-              f"as uniform solids pybullet {bu['drift_trans'] * 1000:.1f} mm / {bu['drift_rot']:.2f} deg, MuJoCo "
-              f"{mu['drift_trans'] * 1000:.1f} mm / {mu['drift_rot']:.2f} deg; most moved without its centre: "
-              f"{worst} ({bu['objects'][worst]['drift_trans'] * 1000:.0f} mm in pybullet)", flush=True)
+        changed = ballasted + [i for i in based if i not in ballasted]
+        parts = [f"{d.name}: {len(ballasted)} ballasted, {len(based)} with a completed base"]
+        for label, (b, m) in rows.items():
+            worst = max(changed, key=lambda i: b["objects"][i]["drift_trans"])
+            parts.append(f"{label}: pybullet {b['drift_trans'] * 1000:.1f} mm / {b['drift_rot']:.2f} deg, MuJoCo "
+                         f"{m['drift_trans'] * 1000:.1f} mm / {m['drift_rot']:.2f} deg, most moved {worst} "
+                         f"({b['objects'][worst]['drift_trans'] * 1000:.0f} mm in pybullet)")
+        print("; ".join(parts), flush=True)
     if not found:
-        print(f"ballast: no scene of {a.method!r} on {a.suite!r} has a declared centre of mass")
+        print(f"ballast: no scene of {a.method!r} on {a.suite!r} has a declared centre of mass or a completed base")
 
 
 if __name__ == "__main__":

@@ -15,6 +15,22 @@ from phiscene.proxies import ProxyParams, proxy_for_mesh, scene_proxies
 from phiscene.scene import Scene, SceneObject, load_scene, save_scene
 
 
+def ground_alone(oid: str, mesh_path: Path, pose: np.ndarray, description: str, cache: Path,
+                 faithful: dict) -> tuple[Scene, dict, dict]:
+    """One object on the ground (its only supporter), grounded with the faithful settings ``faithful`` (plus
+    ``enabled``) and convex proxies: (grounded scene, assembly record, proxies)."""
+    from phiscene.assembly import AssemblyParams, ground_scene
+    from phiscene.sim.settings import SimSettings
+    from phiscene.topology.graph import SupportEdge, SupportGraph
+
+    scene = Scene([SceneObject(oid, mesh_path, pose, description)])
+    graph = SupportGraph(objects=[oid], edges=[SupportEdge("ground", oid, "supports")], order=[oid])
+    proxies = convex_proxies(scene, cache)
+    params = AssemblyParams.from_dict({"faithful": {"enabled": True, **faithful}})
+    out, rec = ground_scene(scene, [oid], proxies, params, SimSettings(), cache, graph=graph)
+    return out, rec, proxies
+
+
 def box_meshes(root: Path, sizes: dict[str, tuple[float, float, float]]) -> dict[str, Path]:
     """One box mesh file per name (``root/<name>.obj``, centred at the origin), name -> path."""
     return {name: save_mesh(trimesh.creation.box(size), Path(root) / f"{name}.obj") for name, size in sizes.items()}

@@ -15,7 +15,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -442,6 +442,25 @@ def check_proxies(scene, proxies: dict[str, Proxy], ids: list[str] | None = None
     missing = [i for i in ids if i not in proxies or not proxies[i].hulls]
     if missing:
         raise InputError(scene.source, "proxies", f"no collision proxies for objects {missing}")
+
+
+def with_base(proxy: Proxy, base: np.ndarray | None) -> Proxy:
+    """``proxy`` with one more convex piece, an object's completed base (:attr:`phiscene.scene.SceneObject.base`,
+    (k, 3) local); ``proxy`` itself when ``base`` is ``None`` or already its last piece."""
+    if base is None or (proxy.hulls and np.array_equal(proxy.hulls[-1], base)):
+        return proxy
+    return replace(proxy, hulls=[*proxy.hulls, np.asarray(base, dtype=float)])
+
+
+def with_bases(scene, proxies: dict[str, Proxy]) -> dict[str, Proxy]:
+    """``proxies`` (id -> :class:`Proxy`) with each object's completed base of ``scene`` added to its pieces
+    (:func:`with_base`): the collision shapes every simulator and export builds. Objects without a proxy are
+    left out of the check here (:func:`check_proxies` names them)."""
+    out = dict(proxies)
+    for o in scene.objects:
+        if o.base is not None and o.id in out:
+            out[o.id] = with_base(out[o.id], o.base)
+    return out
 
 
 def scene_proxies(scene, params: ProxyParams, cache_dir: str | Path) -> dict[str, Proxy]:

@@ -52,6 +52,13 @@ class SceneObject:
         (:func:`phiscene.inertia.rigid_props`). Grounding declares one for an object at rest in the input that
         topples as a uniform solid (a vase whose flowers outweigh its base; remedy ``ballast`` of
         :mod:`phiscene.assembly.faithful`); every simulator, metric and export uses it.
+    base : (k, 3) float or None
+        Vertices (local, unscaled) of one more convex piece of the object's collision shape, under it: its base
+        completed flat. A reconstruction guesses the hidden bottom of an object (a jug's, a fruit's), and a
+        rounded guess cannot stand where the photo shows the object at rest; grounding declares one when
+        nothing else lets the object rest level (remedy ``base`` of :mod:`phiscene.assembly.faithful`). Every
+        simulator and export adds it to the object's convex proxies (:func:`phiscene.proxies.with_bases`);
+        the visible mesh is unchanged.
     """
 
     id: str
@@ -62,6 +69,7 @@ class SceneObject:
     meta: dict = field(default_factory=dict)
     attached: str | None = None
     com: np.ndarray | None = None
+    base: np.ndarray | None = None
 
     def mesh(self):
         """The local-frame mesh, loaded once per path (see :func:`phiscene.meshes.load_mesh`)."""
@@ -206,6 +214,22 @@ def ground_below(scene: Scene, proxies: dict | None = None) -> float:
     return float(min(transform_points(o.pose, points(o))[:, 2].min() for o in free))
 
 
+def _load_base(path: Path, where: str, value) -> np.ndarray:
+    """An object's ``base`` (:attr:`SceneObject.base`) as a (k, 3) array: at least 4 finite points spanning a
+    volume (``InputError`` naming ``where`` otherwise)."""
+    try:
+        base = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InputError(path, where, "must be a list of [x, y, z] points") from None
+    if base.ndim != 2 or base.shape[1] != 3 or len(base) < 4:
+        raise InputError(path, where, f"must be at least 4 [x, y, z] points, got shape {list(base.shape)}")
+    if not np.isfinite(base).all():
+        raise InputError(path, where, "must be finite")
+    if np.linalg.matrix_rank(base - base.mean(axis=0), tol=1e-9) < 3:
+        raise InputError(path, where, "points are coplanar: they span no convex piece")
+    return base
+
+
 def _rel(target: Path, start: Path) -> str:
     return Path(os.path.relpath(Path(target).resolve(), Path(start).resolve())).as_posix()
 
@@ -224,6 +248,8 @@ def scene_to_dict(scene: Scene, json_dir: Path) -> dict:
             d["attached"] = o.attached
         if o.com is not None:
             d["com"] = [float(v) for v in np.asarray(o.com, dtype=float).round(12)]
+        if o.base is not None:
+            d["base"] = np.asarray(o.base, dtype=float).round(12).tolist()
         objs.append(d)
     out = {"format": FORMAT, "units": "m", "up": [0, 0, 1], "ground": {"height": float(scene.ground_height)},
            "objects": objs}
@@ -301,8 +327,10 @@ def load_scene(path: str | Path, check_meshes: bool = True) -> Scene:
         com = np.asarray(d["com"], dtype=float) if "com" in d else None
         if com is not None and not np.isfinite(com).all():
             raise InputError(path, f"{where}.com", f"must be finite, got {d['com']}")
+        base = _load_base(path, f"{where}.base", d["base"]) if "base" in d else None
         objects.append(SceneObject(id=d["id"], mesh_path=mesh_path, pose=pose, description=d.get("description", ""),
-                                   color=color, meta=d.get("meta", {}), attached=d.get("attached"), com=com))
+                                   color=color, meta=d.get("meta", {}), attached=d.get("attached"), com=com,
+                                   base=base))
     structure = _load_structure(path, data.get("structure", []), seen)
     holders = {"ground"} | {p.id for p in structure}
     for i, o in enumerate(objects):
@@ -327,6 +355,12 @@ def load_scene(path: str | Path, check_meshes: bool = True) -> Scene:
                 raise InputError(path, f"objects[{i}].com", f"declared centre of mass {o.com.tolist()} lies outside "
                                  f"the mesh's bounds {mesh.bounds.tolist()} (local frame): no mass distribution "
                                  "of the object has it there")
+            reach = TOL.base_bounds_share * float(np.max(mesh.extents))
+            if o.base is not None and not np.all((o.base >= mesh.bounds[0] - reach)
+                                                 & (o.base <= mesh.bounds[1] + reach)):
+                raise InputError(path, f"objects[{i}].base", f"completed base reaches beyond the mesh's bounds "
+                                 f"{mesh.bounds.tolist()} (local frame) by more than {TOL.base_bounds_share:g} of "
+                                 "its largest extent: it is no base of this object")
     return scene
 
 

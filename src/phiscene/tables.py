@@ -44,9 +44,9 @@ POSE_COLUMNS = ["displacement_mean", "displacement_max", "rotation_mean", "rotat
 REAL_COLUMNS = {"pen_depth": "min", "float_dist": "min", "drift_trans": "min", "drift_rot": "min",
                 "drift_trans_mujoco": "min", "drift_rot_mujoco": "min", "displacement_mean": "min",
                 "displacement_max": "min", "rotation_mean": "min", "rotation_max": "min"}
-#: Its unranked columns: attached objects, objects with a declared centre of mass, settled fraction and seconds per
-#: scene (grounding methods only).
-REAL_EXTRA = ["attached", "ballasted", "settled_frac", "seconds"]
+#: Its unranked columns: attached objects, objects with a declared centre of mass, objects with a completed base,
+#: settled fraction and seconds per scene (grounding methods only).
+REAL_EXTRA = ["attached", "ballasted", "bases", "settled_frac", "seconds"]
 #: Footnote of tables whose drift leaves attached objects out.
 ATTACHED_NOTE = ("Objects attached to a wall, the ceiling or the ground (``attached``) are static: they are "
                  "colliders for the others and are left out of the drift and floating averages. The displacement "
@@ -54,7 +54,9 @@ ATTACHED_NOTE = ("Objects attached to a wall, the ceiling or the ground (``attac
                  "method gives it: none for phi_scene), so that every method is averaged over the same objects. "
                  "Objects with a declared centre of mass (``ballasted``: grounding's remedy ``ballast``, for an "
                  "object at rest in the input that topples as a uniform solid) are simulated with it in both "
-                 "simulators.")
+                 "simulators, and objects with a completed base (``bases``: remedy ``base``, for one whose round "
+                 "bottom, a guess of its hidden side, cannot stand where the input has it at rest) with that "
+                 "flat piece under them.")
 #: Ablation table (paper Tab. 6): reference alignment (mask IoU in place of CLIP-I) + the physical metrics.
 ABLATION_COLUMNS = {"mask_iou": "max", **PHYS_COLUMNS}
 
@@ -216,6 +218,7 @@ def real_scene_rows(files: dict[str, list[str | Path]], scenes: list[str],
                 row.update({k: pose[k] for k in ("displacement_mean", "displacement_max", "rotation_mean",
                                                   "rotation_max", "attached")})
                 row["ballasted"] = pose.get("ballasted", 0)  # metrics files older than the column: none
+                row["bases"] = pose.get("bases", 0)
             log_path = (logs or {}).get(method, [None] * len(paths))[i]
             row.update(_assembly_summary(log_path))
             rows.append(row)

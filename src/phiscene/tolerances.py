@@ -43,6 +43,10 @@ class Tolerances:
     com_bounds_pad
         How far (m, local frame) a declared centre of mass (``com`` in ``scene.json``) may lie outside
         its mesh's bounding box (rounding); farther is refused.
+    base_bounds_share
+        How far a completed base (``base`` in ``scene.json``) may reach beyond its mesh's bounding box, as a
+        share of the mesh's largest extent: it completes the bottom flat (:func:`phiscene.assembly.faithful.
+        flat_base`), within a thin band under it; farther is refused.
     """
 
     pose_orthogonality: float = 1e-5
@@ -56,6 +60,7 @@ class Tolerances:
     sdf_aabb_pad: float = 1e-6
     footprint_resolution: float = 1e-6
     com_bounds_pad: float = 1e-6
+    base_bounds_share: float = 0.25
 
 
 TOL = Tolerances()

@@ -8,7 +8,7 @@ bumping one here after a behaviour change reruns exactly the affected jobs
 BENCHMARK = 3
 PROXIES = 3
 TOPOLOGY = 7
-GROUND = 10
-METRICS = 6
-TABLES = 3
+GROUND = 11
+METRICS = 7
+TABLES = 4
 REPORT = 1

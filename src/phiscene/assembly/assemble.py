@@ -34,7 +34,7 @@ from phiscene.assembly.settle import (
 )
 from phiscene.errors import InputError
 from phiscene.params import Params
-from phiscene.proxies import Proxy, check_proxies
+from phiscene.proxies import Proxy, check_proxies, with_base, with_bases
 from phiscene.scene import Scene
 from phiscene.sim.settings import SimSettings
 from phiscene.transforms import decompose, transform_points
@@ -171,6 +171,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         log.warning("objects not in the placement order, appended at the end: %s", ", ".join(appended))
     if params.settle:
         check_proxies(scene, proxies, order)
+    proxies = with_bases(scene, proxies)  # the input's completed bases, pieces of the collision shapes
     pp = params.penetration_params
     poses: dict[str, np.ndarray] = {}
     placed: list[SdfBody] = []
@@ -178,6 +179,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     coms: dict[str, np.ndarray] = {}  # faithful: centre of mass per object, local frame
     # declared centres of mass (the input's, and the remedy ballast's), local frame
     masses: dict[str, np.ndarray] = {o.id: np.asarray(o.com, dtype=float) for o in scene.objects if o.com is not None}
+    # completed bases (the input's, and the remedy base's), local frame
+    bases: dict[str, np.ndarray] = {o.id: np.asarray(o.base, dtype=float) for o in scene.objects if o.base is not None}
     surfaces: dict[str, np.ndarray] = {}  # faithful: upward surface samples per placed object (remedy onto)
     world_meshes: dict[str, object] = {}  # faithful: placed supporters' meshes at their grounded poses
     world_cm = BulletWorld(sim, cache_dir) if params.settle else contextlib.nullcontext()
@@ -230,7 +233,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             if params.settle and info is not None:
                 pose = _settle_faithful(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params,
                                         fp, info, rec, masses.get(oid))
-                _keep_mass(masses, oid, rec, obj.com)
+                _kept(masses, bases, oid, rec, obj)
             elif params.settle:
                 pose = _settle(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params, rec,
                                masses.get(oid))
@@ -258,14 +261,14 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             if progress is not None:
                 progress(_progress_line(index, len(order), oid, rec))
     if params.faithful.enabled and params.settle and params.faithful.joint_settle_frames > 0:
-        poses = _joint_settle(_as_grounded(scene.with_poses(poses), attached, masses), proxies, sim, cache_dir,
-                              params.faithful, params.settle_params, objects, coms,
+        poses = _joint_settle(_as_grounded(scene.with_poses(poses), attached, masses, bases), proxies, sim,
+                              cache_dir, params.faithful, params.settle_params, objects, coms,
                               {o: np.asarray(scene.get(o).pose, float) for o in order})
         if params.faithful.reground:
             poses = _reground_collapsed(scene, order, proxies, params, sim, cache_dir, graph, attached, poses,
-                                        objects, coms, masses, progress, eye)
+                                        objects, coms, masses, bases, progress, eye)
     if params.faithful.enabled and params.settle and params.faithful.joint_frames > 0:
-        _joint_check(_as_grounded(scene.with_poses(poses), attached, masses), proxies, sim, cache_dir,
+        _joint_check(_as_grounded(scene.with_poses(poses), attached, masses, bases), proxies, sim, cache_dir,
                      params.faithful, objects)
     unsettled = [o for o, r in objects.items() if r["settled"] is False]
     summary = {"objects": len(order), "settled": sum(r["settled"] is True for r in objects.values()),
@@ -283,7 +286,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     summary["attached"] = sorted(attached)
     record = {"format": LOG_FORMAT, "order": order, "appended": appended, "params": params.to_dict(),
               "sim": sim.to_dict(), "objects": objects, "summary": summary}
-    return _as_grounded(scene.with_poses(poses), attached, masses), record
+    return _as_grounded(scene.with_poses(poses), attached, masses, bases), record
 
 
 def _flush_attached(scene: Scene, oid: str, obj, proxy: Proxy | None, holder: str, max_angle_deg: float,
@@ -482,7 +485,8 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
     normals = _resting_normals(hull.vertices, cache_dir) if flushable else np.zeros((0, 3))
     leaning_ids = [e.source for e in edges if e.relation == "leans_on"]
     return {"parents": parents, "below": below, "leaning": leaning_ids, "up": up, "normals": normals, "com": com,
-            "flushable": flushable, "flush_angle": 0.0, "diag": float(np.linalg.norm(mesh.extents) * scale),
+            "flushable": flushable, "given_base": obj.base is not None, "flush_angle": 0.0,
+            "diag": float(np.linalg.norm(mesh.extents) * scale),
             "placed": list(poses), "input": np.asarray(obj.pose, dtype=float),
             "walls": [q for q in scene.structure if q.kind == "wall"], "cache_dir": cache_dir,
             "points": points, "below_world": parents_world}
@@ -553,13 +557,16 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
 
     tried: list[dict] = []
     own = props.com / scale  # its centre of mass as it came (local, unscaled)
-    body = {"com": com}  # the centre of mass the body in the world has (declared, local; None: uniform)
+    # the centre of mass the body in the world has (declared, local; None: uniform), and its completed base
+    body = {"com": com, "base": None}
 
-    def mass(declared: np.ndarray | None) -> None:  # the body again, with another centre of mass
-        if declared is not body["com"]:
+    def mass(declared: np.ndarray | None, base: np.ndarray | None = None) -> None:
+        # the body again, with another centre of mass (and completed base, remedy base)
+        if declared is not body["com"] or base is not body["base"]:
+            hulls = with_base(proxy, base).hulls
             world.remove_body(oid)
-            world.add_body(oid, proxy.hulls, pose, rigid_props(mesh, proxy.hulls, sim.density, scale, declared))
-            body["com"] = declared
+            world.add_body(oid, hulls, pose, rigid_props(mesh, hulls, sim.density, scale, declared))
+            body.update(com=declared, base=base)
 
     def attempt(label: str, start: np.ndarray, damped: bool = False, origin: np.ndarray | None = None) -> dict:
         # origin: where the slide bound is measured from (a shifted start: the start itself)
@@ -611,9 +618,22 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                "loaded": not gave,
                "stayed": stayed, "in_place": in_place, "travel": moved if not lost else math.inf,
                "cost": fa.closeness(pose, result.pose, info["com"], info["diag"], start=lowered) + fell,
-               "why": "; ".join(w for w in whys if w), "touching": near, "com": body["com"], "tilt_tested": tested}
+               "why": "; ".join(w for w in whys if w), "touching": near, "com": body["com"], "base": body["base"],
+               "tilt_tested": tested}
         tried.append(out)
         return out
+
+    def holds(t: dict) -> bool:
+        # tilt-test a settled result where it came to rest, with the body it had (once): whether it holds
+        if not t["tilt_tested"] and fp.tilt_test > 0:
+            mass(t["com"], t["base"])
+            world.set_pose(oid, t["result"].pose)
+            t["tilt_tested"] = True
+            t["robust"] = holds_when_tilted(world, oid, fp.tilt_test, fp.tilt_frames, fp.joint_tol, fp.joint_tol_deg)
+            t["frames"] += 4 * fp.tilt_frames
+            if not t["robust"]:
+                t["why"] = "; ".join(w for w in (t["why"], f"marginal: tips when tilted {fp.tilt_test:g} deg") if w)
+        return t["robust"]
 
     best = attempt("none", pose)
     if not best["ok"]:
@@ -657,6 +677,22 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                 mass(declared)
                 if not attempt("ballast", start, origin=start)["ok"]:  # the flush is a correction, as for none
                     mass(com)  # the other starts as it came; the ballast result may still be the closest
+            if fp.base and info["flushable"] and not info["given_base"] and not any(t["ok"] for t in tried) \
+                    and not _rests(tried, fa.slide_bound(info["diag"], fp), holds):
+                mass(com)  # the body as it came (a tilt test may have changed it)
+                # nor with its mass low, and no start came to rest where it was put, however turned (a can
+                # tilted by a rotation error stands upright on its bottom, a resting pose 28 deg away): its
+                # bottom is a guess that cannot stand (a jug, a fruit guessed round underneath); complete it
+                # flat where it stands, level, with its mass as low
+                declared = com if declared is None else declared
+                flat = fa.flat_base(start, proxy.hulls, own if declared is None else declared, info["up"],
+                                    fp.tilt_test)
+                if flat is not None:
+                    mass(declared, flat[0])
+                    if not attempt(f"base {flat[1]:g}", start, origin=start)["ok"]:
+                        mass(com)
+            elif not any(t["ok"] for t in tried):
+                mass(com)  # the body as it came (a tilt test may have changed it)
         travelled = min(t["travel"] for t in tried)
         # every start went far, or none came to rest level (tipped over, or still moving: a book whose depth error
         # put it over its supporter's edge): one nearby
@@ -683,14 +719,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         for t in sorted(tried, key=rank)[:FALLBACK_TILTS]:
             if t["gross"] or not t["result"].settled or t["tilt_tested"]:
                 continue
-            mass(t["com"])
-            world.set_pose(oid, t["result"].pose)
-            t["tilt_tested"] = True
-            t["robust"] = holds_when_tilted(world, oid, fp.tilt_test, fp.tilt_frames, fp.joint_tol, fp.joint_tol_deg)
-            t["frames"] += 4 * fp.tilt_frames
-            if t["robust"]:
+            if holds(t):
                 break
-            t["why"] = "; ".join(w for w in (t["why"], f"marginal: tips when tilted {fp.tilt_test:g} deg") if w)
     best = ok[0] if ok else min(tried, key=rank)
     result = best["result"]
     if not best["ok"]:
@@ -699,10 +729,12 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         remedy = result.remedy if best["label"] == "none" else best["label"].split()[0]
     reason = "; ".join(f"{t['label']}: {t['why']}" for t in tried if t is not best or not best["ok"])
     final = result.pose
-    mass(best["com"])
-    if best["label"] == "ballast":
+    mass(best["com"], best["base"])
+    if best["com"] is not None and best["label"].split()[0] in ("ballast", "base"):
         lowered = fa.com_world(final, own)[2] - fa.com_world(final, best["com"])[2]
         rec["ballast"] = {"com": [_round(v, 12) for v in best["com"]], "lowered": _round(lowered)}
+    if best["base"] is not None:
+        rec["base"] = {"points": np.asarray(best["base"]).round(12).tolist(), "share": float(best["label"].split()[1])}
     world.set_pose(oid, final)
     rec["touching"] = best["touching"]
     world.set_static(oid)
@@ -713,6 +745,12 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                settle_translation=_round(moved), settle_rotation=_round(turned), reason=reason,
                attempts=len(tried))
     return final
+
+
+def _rests(tried: list[dict], bound: float, holds: Callable[[dict], bool]) -> bool:
+    """Whether a start of ``tried`` (the attempts of :func:`_settle_faithful`) came to rest where it was put, however
+    turned: settled, its centre of mass within ``bound`` (m) of its start, and ``holds`` (tilt-tested) it."""
+    return any(t["result"].settled and t["travel"] <= bound and holds(t) for t in tried)
 
 
 def _lowered(world, oid: str, pose: np.ndarray, below: list[str], clearance: float) -> np.ndarray:
@@ -734,25 +772,36 @@ def _lowered(world, oid: str, pose: np.ndarray, below: list[str], clearance: flo
     return out
 
 
-def _keep_mass(masses: dict[str, np.ndarray], oid: str, rec: dict, given: np.ndarray | None) -> None:
-    """Record in ``masses`` (id -> (3,) local) the centre of mass ``oid`` was grounded with: the one the remedy
-    ``ballast`` declared (``rec["ballast"]``), else its input's ``given`` one, else none (a uniform solid)."""
-    if "ballast" in rec:
-        masses[oid] = np.asarray(rec["ballast"]["com"], dtype=float)
+def _keep(store: dict[str, np.ndarray], oid: str, chosen, given: np.ndarray | None) -> None:
+    """Record in ``store`` (id -> array, local frame) what ``oid`` was grounded with: what a remedy ``chosen``
+    (the ``ballast``'s declared centre of mass, the ``base``'s completed base), else its input's ``given`` one,
+    else nothing (a uniform solid, its proxies alone)."""
+    if chosen is not None:
+        store[oid] = np.asarray(chosen, dtype=float)
     elif given is not None:
-        masses[oid] = np.asarray(given, dtype=float)
+        store[oid] = np.asarray(given, dtype=float)
     else:
-        masses.pop(oid, None)
+        store.pop(oid, None)
 
 
-def _as_grounded(scene: Scene, attached: dict[str, str], masses: dict[str, np.ndarray] | None = None) -> Scene:
+def _kept(masses: dict[str, np.ndarray], bases: dict[str, np.ndarray], oid: str, rec: dict, obj) -> None:
+    """Record the centre of mass and the completed base ``oid`` (``obj``) was grounded with (:func:`_keep`)."""
+    _keep(masses, oid, rec.get("ballast", {}).get("com"), obj.com)
+    _keep(bases, oid, rec.get("base", {}).get("points"), obj.base)
+
+
+def _as_grounded(scene: Scene, attached: dict[str, str], masses: dict[str, np.ndarray] | None = None,
+                 bases: dict[str, np.ndarray] | None = None) -> Scene:
     """``scene`` with what grounding knows of its objects' bodies set on them: the attachments of ``attached``
-    (id -> what holds it) and the declared centres of mass of ``masses`` (id -> (3,) local, remedy ``ballast``)."""
+    (id -> what holds it), the declared centres of mass of ``masses`` (id -> (3,) local, remedy ``ballast``) and
+    the completed bases of ``bases`` (id -> (k, 3) local, remedy ``base``)."""
     for o in scene.objects:
         if o.id in attached:
             o.attached = attached[o.id]
         if masses and o.id in masses:
             o.com = np.asarray(masses[o.id], dtype=float)
+        if bases is not None:
+            o.base = np.asarray(bases[o.id], dtype=float) if o.id in bases else None
     return scene
 
 
@@ -802,7 +851,7 @@ def _collapsed(rec: dict, fp: FaithfulParams) -> bool:
 def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy], params: "AssemblyParams",
                         sim: SimSettings, cache_dir: Path, graph, attached: dict[str, str],
                         poses: dict[str, np.ndarray], objects: dict[str, dict], coms: dict[str, np.ndarray],
-                        masses: dict[str, np.ndarray],
+                        masses: dict[str, np.ndarray], bases: dict[str, np.ndarray],
                         progress: Callable[[str], None] | None,
                         eye: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Ground again, from its input, each object that joint settling toppled or dropped, against the rest of the
@@ -833,7 +882,8 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
             world.add_ground(scene.ground_height)
             world.add_structure(scene.structure)
             for q, p in context.items():
-                _add_static(world, q, scene.get(q).mesh(), proxies[q], p, sim, masses.get(q))
+                _add_static(world, q, scene.get(q).mesh(), with_base(proxies[q], bases.get(q)), p, sim,
+                            masses.get(q))
             pose, info = _faithful_start(scene, oid, proxies[oid], graph, context, {}, {}, attached, fp, pp.seed,
                                          cache_dir, rec, eye)
             if params.penetration:
@@ -853,14 +903,14 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
         if closer:
             poses[oid] = new
             kept.append(oid)
-            _keep_mass(masses, oid, rec, obj.com)
+            _kept(masses, bases, oid, rec, obj)
             cert = objects[oid].get("certificate")
             if cert is not None:
                 cert["remedy"] = f"{cert['remedy']}+reground"
                 cert["touching"] = rec.get("touching", cert["touching"])
     if not kept:
         return poses
-    return _joint_settle(_as_grounded(scene.with_poses(poses), attached, masses), proxies, sim, cache_dir, fp,
+    return _joint_settle(_as_grounded(scene.with_poses(poses), attached, masses, bases), proxies, sim, cache_dir, fp,
                          params.settle_params, objects, coms, {o: np.asarray(scene.get(o).pose, float) for o in order})
 
 

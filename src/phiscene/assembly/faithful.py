@@ -95,6 +95,15 @@ BELOW = ("supports", "contains")
 #: Upward surface samples per placed object for the remedy ``onto`` (:func:`upward_samples`).
 ONTO_SAMPLES = 3000
 
+#: Remedy ``base`` (:func:`flat_base`): thicknesses of the band of an object's height, above its lowest point,
+#: that is completed flat, thinnest first (shares of the height). The thinnest keeps the mesh closest to its
+#: supporter; the thickest is 10 %: a base completed flat through more of the object is no longer its bottom.
+BASE_SHARES = (0.01, 0.02, 0.04, 0.07, 0.1)
+
+#: Remedy ``base``: the completed base is sampled on a grid of this many cells across to check that the object's
+#: pieces are right above it (:func:`band_covered`).
+BASE_CELLS = 12
+
 #: Remedy ``onto``: the footprint is rasterised with at most this many cells across (:func:`fitting_point`).
 FIT_CELLS = 48
 
@@ -200,6 +209,17 @@ class FaithfulParams(Params):
         of it its supporter holds: a book over its supporter's edge still tips, and is shifted.
     ballast_height
         Height of the declared centre of mass above the object's lowest point, as a share of its height.
+    base
+        Remedy ``base`` (needs ``ballast``): an object that not even the ``ballast`` start brought to rest level,
+        and that no start brought to rest where it was put, however turned (its bottom, a hidden side the
+        reconstruction guessed, is round: a jug, a fruit; a can tilted by a rotation error rests upright on its
+        flat bottom from its resting pose, and is left to the other remedies), is settled once more
+        from the ballast's start, with that centre of mass, on its base completed flat where it stands
+        (:func:`flat_base`: one more convex piece of its collision shape, filling the thinnest band of its
+        height above its lowest point, of ``BASE_SHARES``, that holds it when tilted), before any shifted
+        start. Kept when accepted like any start; the piece goes into the grounded scene
+        (:attr:`phiscene.scene.SceneObject.base`), where every simulator, metric and export adds it to the
+        object's proxies. The visible mesh is unchanged. Not for an object whose input already has a base.
     ray
         With the photo's camera (:func:`~phiscene.assembly.assemble.ground_scene` ``eye``), close part of an
         object's vertical gap to what holds it (floating, or sunk in) by moving it along the camera ray through its
@@ -250,6 +270,7 @@ class FaithfulParams(Params):
     reground_move: float = 0.09
     ballast: bool = True
     ballast_height: float = 0.25
+    base: bool = True
     ray: bool = False
     ray_share: float = 0.5
     ray_max_shift: float = 0.15
@@ -596,6 +617,113 @@ def ballast_com(pose: np.ndarray, com_local: np.ndarray, hull_local: np.ndarray,
         if inside.find_simplex(p[None])[0] >= 0:
             return transform_points(np.linalg.inv(pose), p[None])[0]
     return None
+
+
+
+def flat_base(pose: np.ndarray, hulls_local: list[np.ndarray], com_local: np.ndarray, up: np.ndarray,
+              tilt_deg: float, shares: tuple[float, ...] = BASE_SHARES) -> tuple[np.ndarray, float] | None:
+    """The object's base completed flat at ``pose``: one convex piece under it on which it stands level.
+
+    A reconstruction guesses the hidden bottom of an object; a jug or a fruit guessed round underneath cannot
+    stand where the photo shows it at rest, whatever its mass. The piece is the convex hull of the vertices of
+    the object's convex pieces within a band of its height above its lowest point (along ``up``) and of their
+    projections onto the plane through that point normal to ``up``: the bottom cut flat, filled in rather than
+    cut off (the visible mesh keeps its shape and still touches its supporter). The thinnest band of ``shares``
+    (shares of the height) is taken whose flat base
+
+    - holds the centre of mass inside it with a margin: at least its height above the base times the tangent
+      of twice ``tilt_deg``, so that it holds the object when gravity tilts by ``tilt_deg`` (the settling tilt
+      test);
+    - only fills the band: the object's pieces are within the band above every point of it
+      (:func:`band_covered`). A table's or a chair's feet span no base: that piece would be a slab between its
+      legs, under whatever stands beneath it.
+
+    Parameters
+    ----------
+    pose : (4, 4) float
+        The object's pose (uniform scale allowed), level where it should rest.
+    hulls_local : list of (k, 3) float
+        Vertices of its convex pieces, local frame (unscaled).
+    com_local : (3,) float
+        Its centre of mass, local frame (unscaled).
+    up : (3,) float
+        Unit normal of the surface it rests on (world).
+    tilt_deg
+        The tilt the base must withstand (deg).
+    shares
+        Band thicknesses tried, thinnest first, as shares of the object's height along ``up``.
+
+    Returns
+    -------
+    ``(points, share)``: the piece's vertices (m, 3), local frame (unscaled), and the band share taken; ``None``
+    when no band holds the centre of mass.
+    """
+    from shapely.geometry import MultiPoint, Point
+
+    up = np.asarray(up, dtype=float) / np.linalg.norm(up)
+    pieces = [transform_points(pose, np.asarray(h, dtype=float)) for h in hulls_local]
+    points = np.vstack(pieces)
+    heights = points @ up
+    lo, tall = float(heights.min()), float(np.ptp(heights))
+    centre = com_world(pose, com_local)
+    lever = float(centre @ up) - lo
+    if tall <= 0.0 or lever <= 0.0:
+        return None
+    e1 = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(up, e1)
+    need = lever * math.tan(math.radians(2.0 * tilt_deg))
+    at = Point(float(centre @ e1), float(centre @ e2))
+    for share in shares:
+        band = points[heights <= lo + share * tall]
+        if len(band) < 3:
+            continue
+        flat = band - np.outer(band @ up - lo, up)
+        foot = MultiPoint([(float(p @ e1), float(p @ e2)) for p in flat]).convex_hull
+        if foot.geom_type != "Polygon" or not foot.contains(at) or foot.exterior.distance(at) < need:
+            continue
+        if not band_covered(foot, e1, e2, up, lo, share * tall, pieces):
+            continue
+        piece = np.unique(np.vstack([band, flat]).round(12), axis=0)
+        if np.linalg.matrix_rank(piece - piece.mean(axis=0), tol=1e-9) < 3:
+            continue
+        return transform_points(np.linalg.inv(pose), piece), float(share)
+    return None
+
+def band_covered(foot, e1: np.ndarray, e2: np.ndarray, up: np.ndarray, lo: float, band: float,
+                 pieces: list[np.ndarray], cells: int = BASE_CELLS) -> bool:
+    """Whether convex ``pieces`` (each (k, 3) world vertices) lie within ``band`` (m) above every point of the
+    polygon ``foot`` (shapely, in the coordinates ``(p . e1, p . e2)`` of the plane ``p . up = lo``).
+
+    The polygon is sampled on a grid of ``cells`` across (its centroid when no grid point falls inside); a ray
+    along ``up`` from each sample must enter a piece at most ``band`` above the plane. The entry of a ray into a
+    convex piece is the largest of its entries into the half-spaces of the piece's facets.
+    """
+    from scipy.spatial import ConvexHull, QhullError
+    from shapely import contains_xy
+
+    x0, y0, x1, y1 = foot.bounds
+    gx, gy = np.meshgrid(np.linspace(x0, x1, cells + 2)[1:-1], np.linspace(y0, y1, cells + 2)[1:-1])
+    keep = contains_xy(foot, gx.ravel(), gy.ravel())
+    uv = np.c_[gx.ravel()[keep], gy.ravel()[keep]]
+    if not len(uv):
+        uv = np.array([[foot.centroid.x, foot.centroid.y]])
+    starts = uv[:, :1] * e1 + uv[:, 1:] * e2 + lo * up  # (n, 3) on the plane
+    entry = np.full(len(starts), np.inf)
+    for piece in pieces:
+        try:
+            eq = ConvexHull(piece).equations  # (f, 4): n . x + d <= 0 inside
+        except (QhullError, ValueError):
+            continue
+        normal, offset = eq[:, :3], eq[:, 3]
+        along = normal @ up  # (f,)
+        bound = -(starts @ normal.T + offset) / np.where(along == 0.0, 1.0, along)  # (n, f): t on each plane
+        lower = np.where(along < 0, bound, -np.inf).max(axis=1)
+        upper = np.where(along > 0, bound, np.inf).min(axis=1)
+        parallel_out = ((starts @ normal.T + offset) > 0) & (along == 0.0)
+        hit = (lower <= upper) & ~parallel_out.any(axis=1) & (upper >= 0.0)
+        entry = np.where(hit, np.minimum(entry, np.maximum(lower, 0.0)), entry)
+    return bool(np.all(entry <= band + 1e-9))
 
 
 def vertical_gap(points: np.ndarray, supporters: dict, ground_height: float, band: float = 0.3,

@@ -31,7 +31,7 @@ import numpy as np
 from phiscene.assembly.settle import window_motion
 from phiscene.baselines.joint_sdf import JointSdfParams, joint_sdf
 from phiscene.params import Params
-from phiscene.proxies import Proxy, check_proxies
+from phiscene.proxies import Proxy, check_proxies, with_base
 from phiscene.scene import Scene
 from phiscene.sim.settings import SimSettings
 from phiscene.transforms import decompose
@@ -134,7 +134,7 @@ def joint_sim(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, params:
         world.add_ground(scene.ground_height)
         world.add_structure(scene.structure)  # walls and ceiling: static colliders
         for o in scene.objects:
-            hulls = proxies[o.id].hulls
+            hulls = with_base(proxies[o.id], o.base).hulls  # its completed base: a piece of its collision shape
             world.add_body(o.id, hulls, o.pose, rigid_props(o.mesh(), hulls, sim.density, decompose(o.pose)[2],
                                                                o.com))
             if o.attached is not None:

@@ -93,7 +93,7 @@ import trimesh
 from phiscene.atomic import atomic_path, write_json, write_text
 from phiscene.errors import InputError
 from phiscene.inertia import RigidProps, rigid_props
-from phiscene.proxies import check_proxies
+from phiscene.proxies import check_proxies, with_base
 from phiscene.sim.settings import SimSettings
 from phiscene.tolerances import GRAVITY
 from phiscene.transforms import (
@@ -160,7 +160,7 @@ def object_props(scene: "Scene", proxies: dict[str, "Proxy"], sim: SimSettings) 
     out = {}
     for o in scene.objects:
         _, _, scale = decompose(o.pose)
-        out[o.id] = rigid_props(o.mesh(), proxies[o.id].hulls, sim.density, scale, o.com)
+        out[o.id] = rigid_props(o.mesh(), with_base(proxies[o.id], o.base).hulls, sim.density, scale, o.com)
     return out
 
 
@@ -338,7 +338,7 @@ def export_urdf(scene: "Scene", proxies: dict[str, "Proxy"], out_dir: str | Path
         visual.apply_scale(scale)
         write_text(mesh_dir / "visual.obj", _obj_text(visual))
         hull_names = []
-        for k, h in enumerate(proxies[o.id].hulls):
+        for k, h in enumerate(with_base(proxies[o.id], o.base).hulls):
             hull = trimesh.convex.convex_hull(np.asarray(h, dtype=float) * scale)
             with atomic_path(mesh_dir / f"hull_{k}.stl") as tmp:
                 tmp.write_bytes(trimesh.exchange.stl.export_stl(hull))

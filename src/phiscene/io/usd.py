@@ -129,7 +129,7 @@ def export_usd(scene: "Scene", proxies: dict[str, "Proxy"], path: str | Path, si
     from pxr import Gf, Usd, UsdGeom, UsdPhysics, Vt
 
     from phiscene.io.export import _check_ids, object_props, object_rgb
-    from phiscene.proxies import check_proxies
+    from phiscene.proxies import check_proxies, with_base
 
     _check_ids(scene)
     check_proxies(scene, proxies)
@@ -180,7 +180,7 @@ def export_usd(scene: "Scene", proxies: dict[str, "Proxy"], path: str | Path, si
         visual = _mesh_prim(stage, f"{base}/visual", np.asarray(mesh.vertices) * s, mesh.faces)
         rgb = [c / 255.0 for c in object_rgb(o)]
         visual.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(Vt.Vec3fArray([Gf.Vec3f(*rgb)]))
-        for k, hull_vertices in enumerate(proxies[o.id].hulls):
+        for k, hull_vertices in enumerate(with_base(proxies[o.id], o.base).hulls):
             hull = trimesh.convex.convex_hull(np.asarray(hull_vertices, dtype=float) * s)
             col = _mesh_prim(stage, f"{base}/collision_{k}", hull.vertices, hull.faces)
             col.CreatePurposeAttr(UsdGeom.Tokens.guide)

@@ -145,10 +145,11 @@ def drift_bullet(scene: "Scene", proxies: dict[str, "Proxy"], params: DriftParam
         An object has no proxy.
     """
     from phiscene.inertia import rigid_props
-    from phiscene.proxies import check_proxies
+    from phiscene.proxies import check_proxies, with_bases
     from phiscene.sim.bullet import BulletWorld
 
     check_proxies(scene, proxies)
+    proxies = with_bases(scene, proxies)  # completed bases: pieces of the collision shapes
     offset = np.array([0.0, 0.0, float(params.upward_offset)])
     floor = ground_below(scene, proxies)
     with BulletWorld(sim, cache_dir) as world:
@@ -210,6 +211,7 @@ def drift_mujoco(scene: "Scene", proxies: dict[str, "Proxy"], params: DriftParam
     """
     import mujoco
 
+    from phiscene.proxies import with_bases
     from phiscene.sim.mujoco import body_poses, build_spec, compile_model, step_frames
 
     offset = float(params.upward_offset)
@@ -220,6 +222,7 @@ def drift_mujoco(scene: "Scene", proxies: dict[str, "Proxy"], params: DriftParam
         raise ValueError(f"frames must be >= 0, got {params.frames}")
     lift = make_pose(translation=[0.0, 0.0, offset])
     lifted = scene.with_poses({o.id: lift @ o.pose for o in scene.objects if o.attached is None})
+    proxies = with_bases(scene, proxies)  # completed bases: pieces of the collision shapes
     floor = ground_below(scene, proxies)
     spec = build_spec(lifted, proxies, sim, floor, mj)
     model = compile_model(spec, sim)

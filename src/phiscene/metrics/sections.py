@@ -169,7 +169,8 @@ def _pose(with_gt: bool) -> Callable[[SectionContext], dict]:
         pp = ctx.params(PoseParams, "pose")
         return {**pose_metrics(ctx.scene, ctx.initial(), ctx.gt() if with_gt else None, ctx.align, pp.samples,
                                pp.seed), "attached": len(ctx.scene.attached_ids),
-                "ballasted": sum(o.com is not None for o in ctx.scene.objects)}
+                "ballasted": sum(o.com is not None for o in ctx.scene.objects),
+                "bases": sum(o.base is not None for o in ctx.scene.objects)}
 
     return compute
 

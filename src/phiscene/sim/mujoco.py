@@ -250,6 +250,8 @@ def build_spec(scene: "Scene", proxies: dict[str, "Proxy"], sim: SimSettings, gr
     """
     import mujoco
 
+    from phiscene.proxies import with_base
+
     mj = mj or MujocoParams()
     if not scene.objects:
         raise InputError(scene.source, "objects", "scene has no objects")
@@ -282,6 +284,7 @@ def build_spec(scene: "Scene", proxies: dict[str, "Proxy"], sim: SimSettings, gr
         proxy = proxies.get(o.id)
         if proxy is None or not proxy.hulls:
             raise InputError(scene.source, f"{where}.id", f"no convex proxies for object {o.id!r}")
+        proxy = with_base(proxy, o.base)  # its completed base, a piece of its collision shape
         _, _, scale = decompose(o.pose)
         props = rigid_props(o.mesh(), proxy.hulls, sim.density, scale, o.com)
         frame = body_frame(o.pose, props)
