@@ -14,16 +14,8 @@ from phiscene.metrics.physical import PhysicalParams, physical_metrics
 from phiscene.proxies import ProxyParams, scene_proxies
 from phiscene.scene import Plane, Scene, SceneObject
 from phiscene.sim.settings import SimSettings
-from phiscene.topology.attached import (
-    AttachedParams,
-    attached_ids,
-    attached_objects,
-    head_words,
-    is_fragment,
-    names_fixture,
-    panel_normal,
-    says_mounted,
-)
+from phiscene.topology.attached import AttachedParams, attached_ids, attached_objects, is_fragment, panel_normal
+from phiscene.topology.words import head_words, names_fixture, says_mounted
 from phiscene.transforms import make_pose, rotation_z
 
 SIM = SimSettings()

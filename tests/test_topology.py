@@ -474,7 +474,7 @@ def test_bridge_keeps_two_parents_after_assembly(tmp_path, seed):
 # ---------------------------------------------------------------- floor furniture prior
 
 def test_head_noun_of_descriptions():
-    from phiscene.topology.floor import head_noun, names_furniture
+    from phiscene.topology.words import head_noun, names_furniture
 
     assert head_noun("white and gold table lamp on nightstand") == "lamp"
     assert head_noun("wooden chair 87 cm") == "chair"

@@ -11,7 +11,7 @@ its footprint):
 
 * description: a wall or ceiling object (:data:`WALL_WORDS`, e.g. "poster", "painting", "curtain",
   "whiteboard", "ceiling fan") or an explicit "on the wall" / "hanging" phrase (:data:`MOUNT_PHRASES`);
-* partial furniture: floor furniture (a chair, a cabinet: :func:`~phiscene.topology.floor.names_furniture`)
+* partial furniture: floor furniture (a chair, a cabinet: :func:`names_furniture`)
   whose bottom is at least ``min_height`` above the ground and higher above it than the object is tall, or at
   least ``partial_gap`` above it when its description says it is seen only in part ("partially visible",
   "occluded", "cut off": :data:`PARTIAL_WORDS`) (``partial``). Such a mesh is a fragment: the part of a chair
@@ -31,36 +31,22 @@ building fixtures (:data:`FIXTURE_WORDS`: windows, curtains, blinds, radiators),
 they reach: a window above a radiator, a floor-length curtain or a radiator on its wall brackets a hand's width above
 the floor is attached whatever is under it and however low it starts. The
 fixture word must name the object itself, in the description's head before its first preposition ("white curtains
-on the left window" is a fixture, "plant on the window sill" is not).
+on the left window" is a fixture, "plant on the window sill" is not). The word lists and the readers of
+descriptions are in :mod:`phiscene.topology.words`.
 """
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from phiscene.params import Params
 from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph
+from phiscene.topology.words import names_fixture, names_furniture, names_wall_object, says_mounted, says_partial
 
-#: Words naming objects that are normally fixed to a wall or the ceiling.
-WALL_WORDS = ("poster", "painting", "picture", "artwork", "art", "framed", "window", "curtain", "curtains",
-              "blind", "blinds", "whiteboard", "blackboard", "chalkboard", "clock", "mirror", "fan", "chandelier",
-              "sconce", "pendant", "canvas", "print", "photo", "photograph", "calendar", "board", "tapestry")
-#: Words naming building fixtures: attached wherever they reach (module docstring).
-FIXTURE_WORDS = ("window", "windows", "curtain", "curtains", "drape", "drapes", "blind", "blinds", "radiator",
-                 "radiators")
-#: Prepositions that end a description's head ("<head> on the <supporter>").
-HEAD_END = ("on", "under", "in", "at", "by", "near", "beside", "above", "below", "next", "with", "over", "against",
-            "behind", "between", "beneath", "underneath", "inside", "atop", "along", "across", "around")
-#: Phrases saying an object is mounted (matched in the lower-case description).
-MOUNT_PHRASES = ("on the wall", "on wall", "wall mounted", "wall-mounted", "mounted", "hanging", "hung",
-                 "on the ceiling", "from the ceiling", "ceiling")
 #: Relation name of an attachment edge.
 ATTACHED = "attached"
-#: Words saying an object is seen only in part (its lower part may be missing from the reconstruction).
-PARTIAL_WORDS = ("partially", "partly", "partial", "occluded", "truncated", "cropped", "cut")
 #: Reason of an attachment that keeps a fragment of floor furniture in place (:func:`is_fragment`).
 PARTIAL = "partial"
 #: A panel's thin axis is at most this far (deg) from horizontal (:func:`panel_normal`).
@@ -118,37 +104,6 @@ class AttachedParams(Params):
             raise ValueError("attachment distances must be >= 0")
         if not 0 < self.thin_ratio < 1 or self.samples < 4:
             raise ValueError("attachment 'thin_ratio' must be in (0, 1) and 'samples' >= 4")
-
-
-def _has_word(description: str, words: tuple[str, ...]) -> bool:
-    """Whether one of a description's lower-case words is in ``words``."""
-    return bool(set(re.findall(r"[a-z]+", description.lower())) & set(words))
-
-
-def names_wall_object(description: str) -> bool:
-    """Whether a description names a wall or ceiling object (a word of :data:`WALL_WORDS`)."""
-    return _has_word(description, WALL_WORDS)
-
-
-def says_mounted(description: str) -> bool:
-    """Whether a description names a wall/ceiling object or says it is mounted (:data:`WALL_WORDS`, phrases)."""
-    return names_wall_object(description) or any(p in description.lower() for p in MOUNT_PHRASES)
-
-
-def head_words(description: str) -> list[str]:
-    """The lower-case words of a description's head: those before its first :data:`HEAD_END` preposition
-    ("white curtains on the left window" -> ["white", "curtains"])."""
-    head = []
-    for w in re.findall(r"[a-z]+", description.lower()):
-        if w in HEAD_END:
-            break
-        head.append(w)
-    return head
-
-
-def names_fixture(description: str) -> bool:
-    """Whether a description's head (:func:`head_words`) names a building fixture (:data:`FIXTURE_WORDS`)."""
-    return bool(set(head_words(description)) & set(FIXTURE_WORDS))
 
 
 def panel_normal(mesh, thin_ratio: float) -> np.ndarray | None:
@@ -214,11 +169,6 @@ def _text(obj) -> str:
     return obj.description or obj.id.replace("_", " ")
 
 
-def says_partial(description: str) -> bool:
-    """Whether a description says the object is seen only in part (a word of :data:`PARTIAL_WORDS`)."""
-    return _has_word(description, PARTIAL_WORDS)
-
-
 def is_fragment(description: str, bottom: float, top: float, ground: float, params: AttachedParams) -> bool:
     """Whether an object is a fragment of floor furniture (module docstring, reason ``partial``).
 
@@ -226,8 +176,6 @@ def is_fragment(description: str, bottom: float, top: float, ground: float, para
     ``ground`` height and higher above it than the object is tall (``top - bottom``), or at least
     ``params.partial_gap`` above it when the description says it is seen only in part (:func:`says_partial`).
     """
-    from phiscene.topology.floor import names_furniture  # floor.py reads descriptions with this module's helpers
-
     gap = bottom - ground
     high = gap >= params.min_height and gap > top - bottom
     return (high or (gap >= params.partial_gap and says_partial(description))) and names_furniture(description)

@@ -6,40 +6,19 @@ over the chairs' seats. Read from near contact alone, such a scene says the tabl
 on each other, and a scene grounded on that graph collapses when it is released as a whole. Furniture is made to
 stand on the floor, so the geometric backend takes the description as a prior (:func:`floor_standing`, setting
 ``topology.geometric.floor_reach``): an object whose description's head noun names floor furniture
-(:data:`FURNITURE_WORDS`) and whose bottom is within ``floor_reach`` of the ground keeps only supporters that lie
-low themselves (a rug, a mat, a platform: their top within ``floor_reach`` of the ground) and its walls or objects it
-leans on, and gets the ground as a supporter. A chair stacked on a table, a stool on a desk, a table lamp (head noun
-"lamp") or anything whose bottom is higher are left as the geometry says.
+(:data:`~phiscene.topology.words.FURNITURE_WORDS`) and whose bottom is within ``floor_reach`` of the ground keeps
+only supporters that lie low themselves (a rug, a mat, a platform: their top within ``floor_reach`` of the ground)
+and its walls or objects it leans on, and gets the ground as a supporter. A chair stacked on a table, a stool on a
+desk, a table lamp (head noun "lamp") or anything whose bottom is higher are left as the geometry says.
 """
 
 from __future__ import annotations
 
-from phiscene.topology.attached import head_words
 from phiscene.topology.graph import GROUND, SupportEdge
+from phiscene.topology.words import names_furniture
 
-#: Head nouns of furniture that stands on the floor.
-FURNITURE_WORDS = ("chair", "chairs", "armchair", "table", "tables", "desk", "sofa", "couch", "bed", "cabinet",
-                   "dresser", "wardrobe", "bookshelf", "bookcase", "nightstand", "stool", "bench", "ottoman",
-                   "sideboard", "cupboard", "drawers", "refrigerator", "fridge", "piano", "armoire", "credenza")
-#: Words after the head noun that do not name another object ("wooden cabinet partially visible", "chair 87 cm").
-TRAILING = ("partially", "partly", "visible", "occluded", "cut", "off", "cropped", "cm", "mm", "m", "x")
 #: Relations an object keeps whatever the prior says (it leans on a wall or an object besides standing).
 KEPT_RELATIONS = ("leans_on",)
-
-
-def head_noun(description: str) -> str:
-    """The last word of a description's head (:func:`~phiscene.topology.attached.head_words`), trailing
-    qualifiers and units (:data:`TRAILING`) skipped: "white and gold table lamp on nightstand" -> "lamp",
-    "wooden chair 87 cm" -> "chair", "wooden cabinet partially visible in the bottom left" -> "cabinet"."""
-    head = head_words(description)
-    while head and head[-1] in TRAILING:
-        head.pop()
-    return head[-1] if head else ""
-
-
-def names_furniture(description: str) -> bool:
-    """Whether a description's head noun (:func:`head_noun`) is floor furniture (:data:`FURNITURE_WORDS`)."""
-    return head_noun(description) in FURNITURE_WORDS
 
 
 def floor_standing(edges: list[SupportEdge], scene, bounds: dict, floor_reach: float) -> tuple[list[SupportEdge],
