@@ -182,7 +182,7 @@ def test_an_object_the_joint_release_toppled_is_grounded_again_on_its_supporter(
     assert _collapsed(objects["box"], params.faithful) and not _collapsed(objects["table"], params.faithful)
     poses = _reground_collapsed(scene, g.order, convex_proxies(scene, work["cache"]), params, SIM, work["cache"], g,
                                 {}, {"table": TABLE, "box": toppled}, objects,
-                                {"table": np.zeros(3), "box": np.zeros(3)}, {}, None)
+                                {"table": np.zeros(3), "box": np.zeros(3)}, {}, {}, None)
     R, t, _ = decompose(poses["box"])
     assert objects["box"]["reground"]["kept"] and objects["box"]["certificate"]["remedy"] == "none+reground"
     assert min(math.degrees(math.acos(min(1.0, abs(R[2, k])))) for k in range(3)) < 0.5
