@@ -730,7 +730,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
     reason = "; ".join(f"{t['label']}: {t['why']}" for t in tried if t is not best or not best["ok"])
     final = result.pose
     mass(best["com"], best["base"])
-    if best["com"] is not None and best["label"].split()[0] in ("ballast", "base"):
+    if best["com"] is not None and best["com"] is not com and best["label"].split()[0] in ("ballast", "base"):
+        # declared by the remedy (a base start keeps the input's own declared centre when the ballast had none)
         lowered = fa.com_world(final, own)[2] - fa.com_world(final, best["com"])[2]
         rec["ballast"] = {"com": [_round(v, 12) for v in best["com"]], "lowered": _round(lowered)}
     if best["base"] is not None:

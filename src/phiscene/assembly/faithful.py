@@ -55,7 +55,10 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    on its supporters ends the search); before the shifted starts, when none came to rest level, the corrected
    pose once more with the centre of mass declared low over its base and flush on the facet it then rests on
    (``ballast``, :func:`ballast_com`: the object is at rest in the photo, so its mass is not that of a uniform
-   solid). When none is accepted, a result that is no gross failure (turned past ``max_stable_angle`` or moved
+   solid); then, when not even that start rests level and no start came to rest where it was put however
+   turned, the same start on its base completed flat (``base``, :func:`flat_base`: its bottom, a hidden side
+   the reconstruction guessed round, cannot stand whatever its mass). When none is accepted, a result that is no
+   gross failure (turned past ``max_stable_angle`` or moved
    past ``onto_reach``: a table flipped over, a chair thrown across the room) is preferred, even one still moving
    when the settling window closed; among those, the settled result that stayed in place (on its supporters if
    one did: the graph may name the wrong one), else one that holds when tilted (the first ``FALLBACK_TILTS``
