@@ -120,3 +120,42 @@ def test_crosssim_and_runtime_tables(tmp_path):
 
     md = to_markdown(rt, {})
     assert "| methods/phi_scene / contact " in md and "('" not in md  # readable labels, not tuples
+
+
+def test_real_table_means_per_method_and_counts_ballasts_and_bases(tmp_path):
+    from phiscene.tables import REAL_COLUMNS, real_scene_rows, real_table
+
+    def metrics(name, v, pose_extra):
+        p = tmp_path / f"{name}.json"
+        p.write_text(json.dumps({
+            "format": METRICS_FORMAT, "sections": ["physical", "mujoco", "pose"],
+            "physical": {"pen_depth": v, "float_dist": v, "drift_trans": v, "drift_rot": 10 * v},
+            "mujoco": {"drift_trans": 2 * v, "drift_rot": 20 * v},
+            "pose": {"displacement_mean": v, "displacement_max": 3 * v, "rotation_mean": v, "rotation_max": v,
+                     "attached": 1, **pose_extra}}))
+        return p
+
+    def log(name, settled, seconds):
+        p = tmp_path / f"{name}.log.json"
+        objects = {f"o{k}": {"settled": s, "settle_remedy": "none"} for k, s in enumerate(settled)}
+        objects["poster"] = {"settled": True, "settle_remedy": "attached"}  # not counted in the settled fraction
+        p.write_text(json.dumps({"summary": {"seconds": seconds}, "objects": objects}))
+        return p
+
+    scenes = ["s0", "s1"]
+    files = {"ours": [metrics("o0", 0.1, {"ballasted": 2, "bases": 1}),
+                      metrics("o1", 0.3, {"ballasted": 0, "bases": 1})],
+             # a metrics file older than the two counts: none
+             "old": [metrics("x0", 0.2, {}), metrics("x1", 0.2, {})]}
+    logs = {"ours": [log("o0", [True, False], 4.0), log("o1", [True, True], 6.0)], "old": [None, None]}
+    per = real_scene_rows(files, scenes, logs)
+    assert per.loc[("ours", "s0"), "settled_frac"] == pytest.approx(0.5)
+    assert per.loc[("old", "s1"), "bases"] == 0 and per.loc[("old", "s1"), "ballasted"] == 0
+    df = real_table(files, scenes, logs)
+    assert df.loc["ours", "pen_depth"] == pytest.approx(0.2)
+    assert df.loc["ours", "drift_rot_mujoco"] == pytest.approx(4.0)
+    assert df.loc["ours", "displacement_max"] == pytest.approx(0.6)
+    assert df.loc["ours", "ballasted"] == pytest.approx(1.0) and df.loc["ours", "bases"] == pytest.approx(1.0)
+    assert df.loc["ours", "settled_frac"] == pytest.approx(0.75) and df.loc["ours", "seconds"] == pytest.approx(5.0)
+    assert np.isnan(df.loc["old", "seconds"]) and df.loc["old", "n_scenes"] == 2
+    assert set(REAL_COLUMNS) <= set(df.columns)
