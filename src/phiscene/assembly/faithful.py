@@ -622,7 +622,6 @@ def ballast_com(pose: np.ndarray, com_local: np.ndarray, hull_local: np.ndarray,
     return None
 
 
-
 def flat_base(pose: np.ndarray, hulls_local: list[np.ndarray], com_local: np.ndarray, up: np.ndarray,
               tilt_deg: float, shares: tuple[float, ...] = BASE_SHARES) -> tuple[np.ndarray, float] | None:
     """The object's base completed flat at ``pose``: one convex piece under it on which it stands level.
@@ -661,11 +660,18 @@ def flat_base(pose: np.ndarray, hulls_local: list[np.ndarray], com_local: np.nda
     ``(points, share)``: the piece's vertices (m, 3), local frame (unscaled), and the band share taken; ``None``
     when no band holds the centre of mass.
     """
+    from scipy.spatial import ConvexHull, QhullError
     from shapely.geometry import MultiPoint, Point
 
     up = np.asarray(up, dtype=float) / np.linalg.norm(up)
     pieces = [transform_points(pose, np.asarray(h, dtype=float)) for h in hulls_local]
     points = np.vstack(pieces)
+    facets = []  # each piece's half-spaces (f, 4), once for every band tried
+    for piece in pieces:
+        try:
+            facets.append(ConvexHull(piece).equations)
+        except (QhullError, ValueError):
+            continue
     heights = points @ up
     lo, tall = float(heights.min()), float(np.ptp(heights))
     centre = com_world(pose, com_local)
@@ -685,7 +691,7 @@ def flat_base(pose: np.ndarray, hulls_local: list[np.ndarray], com_local: np.nda
         foot = MultiPoint([(float(p @ e1), float(p @ e2)) for p in flat]).convex_hull
         if foot.geom_type != "Polygon" or not foot.contains(at) or foot.exterior.distance(at) < need:
             continue
-        if not band_covered(foot, e1, e2, up, lo, share * tall, pieces):
+        if not band_covered(foot, e1, e2, up, lo, share * tall, facets):
             continue
         piece = np.unique(np.vstack([band, flat]).round(12), axis=0)
         if np.linalg.matrix_rank(piece - piece.mean(axis=0), tol=1e-9) < 3:
@@ -693,16 +699,18 @@ def flat_base(pose: np.ndarray, hulls_local: list[np.ndarray], com_local: np.nda
         return transform_points(np.linalg.inv(pose), piece), float(share)
     return None
 
+
 def band_covered(foot, e1: np.ndarray, e2: np.ndarray, up: np.ndarray, lo: float, band: float,
-                 pieces: list[np.ndarray], cells: int = BASE_CELLS) -> bool:
-    """Whether convex ``pieces`` (each (k, 3) world vertices) lie within ``band`` (m) above every point of the
-    polygon ``foot`` (shapely, in the coordinates ``(p . e1, p . e2)`` of the plane ``p . up = lo``).
+                 facets: list[np.ndarray], cells: int = BASE_CELLS) -> bool:
+    """Whether convex pieces lie within ``band`` (m) above every point of the polygon ``foot`` (shapely, in the
+    coordinates ``(p . e1, p . e2)`` of the plane ``p . up = lo``). Each piece is given by its facets' half-spaces
+    (``facets``: per piece (f, 4) rows ``n, d`` with ``n . x + d <= 0`` inside, world frame: Qhull's
+    ``equations``).
 
     The polygon is sampled on a grid of ``cells`` across (its centroid when no grid point falls inside); a ray
     along ``up`` from each sample must enter a piece at most ``band`` above the plane. The entry of a ray into a
     convex piece is the largest of its entries into the half-spaces of the piece's facets.
     """
-    from scipy.spatial import ConvexHull, QhullError
     from shapely import contains_xy
 
     x0, y0, x1, y1 = foot.bounds
@@ -713,17 +721,14 @@ def band_covered(foot, e1: np.ndarray, e2: np.ndarray, up: np.ndarray, lo: float
         uv = np.array([[foot.centroid.x, foot.centroid.y]])
     starts = uv[:, :1] * e1 + uv[:, 1:] * e2 + lo * up  # (n, 3) on the plane
     entry = np.full(len(starts), np.inf)
-    for piece in pieces:
-        try:
-            eq = ConvexHull(piece).equations  # (f, 4): n . x + d <= 0 inside
-        except (QhullError, ValueError):
-            continue
+    for eq in facets:
         normal, offset = eq[:, :3], eq[:, 3]
         along = normal @ up  # (f,)
-        bound = -(starts @ normal.T + offset) / np.where(along == 0.0, 1.0, along)  # (n, f): t on each plane
+        side = starts @ normal.T + offset  # (n, f): > 0 outside the facet's half-space
+        bound = -side / np.where(along == 0.0, 1.0, along)  # (n, f): t on each plane
         lower = np.where(along < 0, bound, -np.inf).max(axis=1)
         upper = np.where(along > 0, bound, np.inf).min(axis=1)
-        parallel_out = ((starts @ normal.T + offset) > 0) & (along == 0.0)
+        parallel_out = (side > 0) & (along == 0.0)
         hit = (lower <= upper) & ~parallel_out.any(axis=1) & (upper >= 0.0)
         entry = np.where(hit, np.minimum(entry, np.maximum(lower, 0.0)), entry)
     return bool(np.all(entry <= band + 1e-9))
