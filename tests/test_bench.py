@@ -17,7 +17,7 @@ from simcheck import resimulate
 
 from phiscene.bench.assets import CATEGORY_CYCLE, asset_library
 from phiscene.bench.build import BenchParams, build_scene, default_params, scene_seed
-from phiscene.bench.cleanmesh import MAX_FACES, canonical, is_clean, remesh_union
+from phiscene.bench.cleanmesh import MAX_FACES, canonical, is_clean, remesh_union, simplify_clean
 from phiscene.bench.degrade import DegradeParams, degrade_scene
 from phiscene.bench.groundtruth import GTParams, ground_truth, release
 from phiscene.bench.templates import TEMPLATES, template_names
@@ -74,6 +74,21 @@ def test_remesh_union_of_touching_shells():
     m = remesh_union([a, b], pitch=0.004)
     assert m.is_volume and m.body_count == 1
     assert m.volume == pytest.approx(2e-3, rel=0.03)  # edges are bevelled by about one grid cell
+
+
+def test_shape_thinner_than_the_remesh_cells_is_no_candidate():
+    # a 1 mm sheet remeshed on 1 cm cells leaves nothing: simplify_clean says so (None) instead of failing on an
+    # empty mesh, so canonical() tries finer cells, then reports the asset (a blob slot then takes its next blob)
+    sheet = trimesh.creation.box(extents=(0.1, 0.1, 0.001))
+    empty = remesh_union([sheet], pitch=0.01)
+    assert len(empty.faces) == 0
+    assert simplify_clean(empty, MAX_FACES) is None
+    # pybullet_data's random_urdfs/297 is such a shape at every cell size tried: a clear error naming its file
+    from phiscene.bench.assets import blob_mesh
+    from phiscene.errors import InputError
+
+    with pytest.raises(InputError, match="297.obj.*could not make a clean closed mesh"):
+        blob_mesh(297)
 
 
 def test_asset_library(tmp_path):

@@ -161,6 +161,8 @@ def _simplifications(mesh: trimesh.Trimesh, max_faces: int, steps: int):
     for _ in range(steps):
         light = _trimesh(man.simplify(tol))
         tol *= 1.25
+        if len(light.faces) < 4:  # collapsed (a thin shape at a coarse tolerance): coarser ones only lose more
+            return
         if len(light.faces) <= max_faces:
             yield light
 
@@ -169,8 +171,10 @@ def simplify_clean(mesh: trimesh.Trimesh, max_faces: int, steps: int = 20) -> tr
     """``mesh`` finished (:func:`_finish`) with at most ``max_faces`` faces and clean (:func:`is_clean`), or ``None``.
 
     The first candidate of :func:`_simplifications` that is clean after rounding and keeps
-    the volume within 5 % is returned.
+    the volume within 5 % is returned; an empty or degenerate mesh (fewer than 4 faces) gives ``None``.
     """
+    if len(mesh.faces) < 4:  # nothing left (remeshed at cells coarser than the shape is thin)
+        return None
     if len(mesh.faces) <= max_faces:
         out = _finish(mesh)
         return out if is_clean(out) else None
