@@ -70,7 +70,7 @@ def plane_tilt(votes: dict, up: np.ndarray) -> float:
     planes = [v for v in votes.values() if v["kind"] == "plane"]
     if not planes:
         return float("nan")
-    w = np.array([v["weight"] for v in planes])
+    w = np.array([v["area"] for v in planes])
     return float((w * np.array([angle_deg(v["up"], up) for v in planes])).sum() / w.sum())
 
 

@@ -132,3 +132,27 @@ def test_floor_is_where_the_standing_objects_stand():
     T = levelling_transform(parts, [0.0, 0.0, 1.0], floor_band=0.25)
     np.testing.assert_allclose(T[:3, :3], np.eye(3), atol=1e-12)
     assert T[2, 3] == pytest.approx(-expected)
+
+
+@pytest.mark.parametrize("power", [1.0, 0.5, 0.0])
+def test_votes_weigh_area_to_the_power(power):
+    # a large table top tilted 6 deg about x and two small level boxes: each votes its top's normal with weight
+    # area ** power, and the estimate is the normalised weighted sum of the votes (all within the inlier cone)
+    R = trimesh.transformations.rotation_matrix(np.radians(6.0), [1, 0, 0])
+    slab = trimesh.creation.box([2.0, 1.0, 0.05]).subdivide().subdivide()  # enough faces for a planar region
+    slab.apply_transform(R)
+    cubes = [trimesh.creation.box([0.2, 0.2, 0.2]).subdivide().subdivide() for _ in range(2)]
+    est = estimate_up({"slab": slab, "c1": cubes[0], "c2": cubes[1]}, [0, 0, 1],
+                      LevelParams(weight_power=power, inlier_deg=20.0))
+    areas = {"slab": 2.0, "c1": 0.04, "c2": 0.04}
+    ups = {"slab": R[:3, :3] @ [0, 0, 1], "c1": np.array([0, 0, 1.0]), "c2": np.array([0, 0, 1.0])}
+    for oid, area in areas.items():
+        assert est.votes[oid]["kind"] == "plane"
+        assert est.votes[oid]["area"] == pytest.approx(area, rel=1e-4)
+        assert est.votes[oid]["weight"] == pytest.approx(area ** power, rel=1e-4)
+    expected = sum(areas[o] ** power * ups[o] for o in areas)
+    assert angle_deg(est.up, expected) < 0.01
+    # the large object's tilt weighs 2 / 2.08 of the estimate at power 1, a third at power 0
+    share = areas["slab"] ** power / sum(a ** power for a in areas.values())
+    assert est.tilt_deg == pytest.approx(angle_deg(expected, [0, 0, 1]), abs=0.01)
+    assert est.tilt_deg == pytest.approx(6.0 * share, abs=0.1)
