@@ -697,3 +697,66 @@ def test_an_object_over_nothing_goes_onto_a_surface_nearer_than_the_floor(work, 
     assert lo[2] == pytest.approx(0.72, abs=5e-3)  # on the shelf
     assert hi[0] <= 0.15 + 1e-3  # wholly over it
     assert rec["objects"]["box"]["certificate"]["settled"]
+
+
+@pytest.mark.parametrize("case", ["beside", "on_top", "between", "too_far"])
+def test_clear_overlaps_moves_out_of_a_side_overlap_by_its_depth(tmp_path, case):
+    """Geometry: a 0.2 m cube overlapping a 1 m block's side by 3 cm is moved 3 cm out along the side's normal;
+    an overlap from below (it rests on the block) is left alone, as is one it cannot leave (held 3 cm deep by
+    blocks on both sides) or one deeper than the move allowed."""
+    from phiscene.assembly.settle import clear_overlaps
+    from phiscene.sim.bullet import BulletWorld
+
+    block = [np.asarray(trimesh.creation.box((1.0, 1.0, 1.0)).vertices)]
+    cube = [np.asarray(trimesh.creation.box((0.2, 0.2, 0.2)).vertices)]
+    at = {"beside": (0.6 - 0.03, 0.0, 0.1), "on_top": (0.0, 0.0, 1.09), "between": (0.6 - 0.03, 0.0, 0.1),
+          "too_far": (0.6 - 0.03, 0.0, 0.1)}[case]
+    with BulletWorld(SIM, tmp_path) as world:
+        world.add_body("block", block, make_pose(translation=(0, 0, 0.5)), None)
+        others = ["block"]
+        if case == "between":  # a second block whose side is 3 cm into the cube's other side
+            world.add_body("other", block, make_pose(translation=(1.14, 0, 0.5)), None)
+            others.append("other")
+        world.add_body("cube", cube, make_pose(translation=at), None)
+        before = world.pose("cube")
+        shift = clear_overlaps(world, "cube", others, 0.002, 0.01 if case == "too_far" else 0.09)
+        assert np.allclose(world.pose("cube"), before)  # put back
+    if case == "beside":
+        np.testing.assert_allclose(shift, [0.03, 0.0, 0.0], atol=1e-3)
+    else:
+        assert shift is None
+
+
+def test_a_plant_whose_hull_overlaps_a_curtain_is_moved_out_and_stands(work, tmp_path):
+    # a "plant": a 20 cm pot, a 2 cm stem and a 60 cm canopy 1 m up; its one convex hull (the proxy) widens from the
+    # pot's bottom edge (x = 0.1 at z = 0) to the canopy's (x = 0.3 at z = 0.98). A fixed panel (a curtain) with its
+    # face at x = 0.16, 40-50 cm up, clears the mesh (the stem) by 15 cm but lies inside the hull's side, which
+    # reaches x = 0.1 + 0.2 z / 0.98 there: 0.202 at its top, 4.2 cm beyond the panel's face. It is moved out of
+    # that overlap, away from the panel (-x) by its depth, before settling, and stands where it was put but for it
+    pot = trimesh.creation.box((0.2, 0.2, 0.2)).apply_translation((0, 0, 0.1))
+    stem = trimesh.creation.box((0.02, 0.02, 0.8)).apply_translation((0, 0, 0.6))
+    canopy = trimesh.creation.box((0.6, 0.6, 0.04)).apply_translation((0, 0, 1.0))
+    plant = save_mesh(trimesh.util.concatenate([pot, stem, canopy]), tmp_path / "plant.obj")
+    panel = save_mesh(trimesh.creation.box((0.02, 0.3, 0.1)), tmp_path / "panel.obj")
+    from phiscene.scene import Scene, SceneObject
+
+    scene = Scene([SceneObject("curtain", panel, make_pose(translation=(0.17, 0.0, 0.45))),
+                   SceneObject("plant", plant, make_pose(translation=(0.0, 0.0, 0.0)))])
+    g = graph_of(scene, [("ground", "curtain", "attached"), ("ground", "plant", "supports")])
+    params = {"faithful": {"enabled": True}, "penetration_params": {"optimizer": "steepest"}}
+    out, rec = run(work, scene, g, params=params, attached={"curtain": "ground"})
+    plant_rec = rec["objects"]["plant"]
+    assert np.allclose(plant_rec["sdf_translation"][:2], 0.0)  # the meshes are apart: no sideways push
+    shift = np.asarray(plant_rec["proxy_clear"])
+    depth = 0.1 + 0.2 * 0.5 / 0.98 - 0.16
+    assert -shift[0] == pytest.approx(depth, abs=0.006) and abs(shift[1]) < 1e-3 and shift[2] == 0.0
+    R, t, _ = decompose(out.get("plant").pose)
+    assert math.degrees(math.acos(min(1.0, R[2, 2]))) < 1.0  # upright
+    np.testing.assert_allclose(t[:2], shift[:2], atol=0.005)  # where it was put, but for the move
+    assert plant_rec["certificate"]["remedy"] == "none" and plant_rec["certificate"]["joint_stable"]
+    # without the move the overlap is there when settling starts: the separation shoves it
+    out0, rec0 = run(work, scene, g, params={**params, "faithful": {"enabled": True, "clear": False}},
+                     attached={"curtain": "ground"})
+    assert "proxy_clear" not in rec0["objects"]["plant"]
+    first = rec0["objects"]["plant"]["certificate"]["reason"].split(";")[0]  # "none: moved 0.939 m / 79.3 deg"
+    assert first.startswith("none: moved") and float(first.split("/")[1].split()[0]) > 45.0  # knocked over

@@ -26,6 +26,7 @@ from phiscene.assembly.faithful import FaithfulParams
 from phiscene.assembly.penetration import PenetrationParams, SdfBody, resolve_penetration, sdf_body
 from phiscene.assembly.settle import (
     SettleParams,
+    clear_overlaps,
     gives_way,
     holds_when_tilted,
     load_carriers,
@@ -551,6 +552,15 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
     props = rigid_props(mesh, proxy.hulls, sim.density, scale, com)
     world.add_body(oid, proxy.hulls, pose, props)
     context = [b for b in world.bodies if b != oid]
+    if fp.clear:
+        # out of what it neither stands nor leans on, where its convex pieces overlap it (the meshes are apart)
+        holders = {"ground", *info["below"], *info["leaning"]}
+        shift = clear_overlaps(world, oid, [b for b in context if b not in holders], fp.contact_tol, fp.max_shift)
+        if shift is not None:
+            pose = pose.copy()
+            pose[:3, 3] += shift
+            world.set_pose(oid, pose)
+            rec["proxy_clear"] = [_round(v) for v in shift]
 
     def touching() -> list[str]:
         return sorted(world.distances(oid, context, fp.contact_tol))

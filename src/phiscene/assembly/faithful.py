@@ -181,6 +181,13 @@ class FaithfulParams(Params):
         Linear and angular damping of the ``damped`` retry (Bullet units, in [0, 1)).
     retry_rolling_friction
         Rolling and spinning friction of the ``damped`` retry.
+    clear
+        Before settling, move an object horizontally out of the objects it neither stands nor leans on where its
+        collision shape overlaps them deeper than ``contact_tol``, if a move of at most ``max_shift`` does
+        (:func:`~phiscene.assembly.settle.clear_overlaps`); every start is then taken from there. The penetration
+        stage works on the meshes, and convex pieces reach beyond them: a potted plant's foliage overlapping a
+        curtain in the simulator, though its mesh is clear of it, is knocked over by the simulator's
+        separation before gravity acts. The move is recorded (``proxy_clear``).
     max_shift
         Remedy ``shifted``: an object whose every start went farther than this (m) or lost its supporters, or none
         of whose starts came to rest level (turned past ``max_turn`` or still moving), is restarted from the
@@ -266,6 +273,7 @@ class FaithfulParams(Params):
     contact_tol: float = 0.004
     retry_damping: float = 0.9
     retry_rolling_friction: float = 0.1
+    clear: bool = True
     max_shift: float = 0.09
     shift_directions: int = 6
     onto_reach: float = 0.3

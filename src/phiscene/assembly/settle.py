@@ -257,6 +257,53 @@ def holds_when_tilted(world: BulletWorld, name: str, tilt_deg: float, frames: in
     return held
 
 
+#: :func:`clear_overlaps`: an overlap whose normal is steeper than this (the horizontal part of the unit normal
+#: is smaller: within 60 deg of vertical) is left alone: the object rests on it, or lowering stops on it.
+CLEAR_MIN_HORIZONTAL = 0.5
+#: :func:`clear_overlaps`: horizontal moves tried before giving up.
+CLEAR_ITERATIONS = 8
+
+
+def clear_overlaps(world: BulletWorld, name: str, others: list[str], tol: float,
+                   max_move: float) -> np.ndarray | None:
+    """The horizontal move (3,) that takes body ``name``'s collision shape out of ``others``, if a short one does.
+
+    A mesh's convex pieces reach beyond it (a plant's foliage, a chair between its legs), so two objects whose
+    meshes are apart may overlap in the simulator, and the simulator pushes them apart at once: a potted plant
+    whose foliage overlaps a curtain by 7 cm is knocked over before gravity acts. Each step moves the body
+    horizontally out of its deepest overlap deeper than ``tol`` (m), along the horizontal part of its normal, by
+    the depth over that part (what clears it along the normal); overlaps within 60 degrees of vertical
+    (:data:`CLEAR_MIN_HORIZONTAL`) are left alone. The body's pose is restored.
+
+    Returns
+    -------
+    The move (m, zero z), or ``None`` when nothing overlaps deeper than ``tol``, when clearing needs more than
+    ``max_move`` (m), or when :data:`CLEAR_ITERATIONS` moves do not clear it (held on opposite sides).
+    """
+    start = world.pose(name)
+    shift = np.zeros(3)
+    try:
+        for _ in range(CLEAR_ITERATIONS):
+            push = np.zeros(3)  # out of the deepest overlap (overlaps on one side would add up past the need)
+            for dist, normal in sorted(world.deepest_overlaps(name, others, tol).values(), key=lambda d: d[0]):
+                h = np.array([normal[0], normal[1], 0.0])
+                size = float(np.linalg.norm(h))
+                if size >= CLEAR_MIN_HORIZONTAL:
+                    push = h / size * (-dist / size)
+                    break
+            if not push.any():
+                return shift if shift.any() else None
+            shift += push
+            if np.linalg.norm(shift) > max_move:
+                return None
+            moved = start.copy()
+            moved[:3, 3] += shift
+            world.set_pose(name, moved)
+        return None
+    finally:
+        world.set_pose(name, start)
+
+
 def load_carriers(world: BulletWorld, name: str, near: list[str], fixed, tol: float, depth: int) -> list[str]:
     """The placed bodies the load test (:func:`gives_way`) releases under ``name``.
 

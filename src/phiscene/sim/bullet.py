@@ -324,6 +324,23 @@ class BulletWorld:
         for _ in range(frames * self.settings.substeps):
             self.p.stepSimulation()
 
+    def deepest_overlaps(self, name: str, others: list[str], depth: float) -> dict[str, tuple[float, np.ndarray]]:
+        """Where body ``name`` overlaps each of ``others`` deeper than ``depth`` (m): the deepest point's signed
+        distance (negative) and its unit normal (3,) pointing from the other body towards ``name``.
+
+        Bodies overlapping less (or not in the world) are left out.
+        """
+        out: dict[str, tuple[float, np.ndarray]] = {}
+        a = self.bodies[name].uid
+        for o in others:
+            if o not in self.bodies:
+                continue
+            pts = [c for c in self.p.getClosestPoints(a, self.bodies[o].uid, 0.0) if c[8] < -depth]
+            if pts:
+                c = min(pts, key=lambda c: c[8])
+                out[o] = (float(c[8]), np.asarray(c[7], dtype=float))
+        return out
+
     def contacts(self, name_a: str, name_b: str | None = None) -> list[dict]:
         """Contact points of body ``name_a`` (with ``name_b`` only, if given).
 
