@@ -8,7 +8,7 @@ bumping one here after a behaviour change reruns exactly the affected jobs
 BENCHMARK = 4
 PROXIES = 3
 TOPOLOGY = 7
-GROUND = 12
+GROUND = 13
 METRICS = 7
 TABLES = 4
 REPORT = 1

@@ -533,7 +533,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                      fp: FaithfulParams, info: dict, rec: dict, com: np.ndarray | None = None) -> np.ndarray:
     """Guarded settling (see :mod:`phiscene.assembly.faithful`); fills ``rec``; returns the frozen pose.
 
-    Every start (the corrected pose, then the nearest resting poses, then a damped run, then the pose moved onto the
+    Every start (the corrected pose, then that pose moved out of proxy overlaps (``clear``), then the nearest
+    resting poses, then a damped run, then the pose moved onto the
     nearest supporting surface, then horizontal shifts when every start so far went farther than ``max_shift`` or
     lost its supporters, or none came to rest level) is lowered onto what lies beneath and settled with the paper's
     settling; the first result within the slide/drop/turn bounds that keeps the graph's supporters is taken, else,
@@ -552,15 +553,6 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
     props = rigid_props(mesh, proxy.hulls, sim.density, scale, com)
     world.add_body(oid, proxy.hulls, pose, props)
     context = [b for b in world.bodies if b != oid]
-    if fp.clear:
-        # out of what it neither stands nor leans on, where its convex pieces overlap it (the meshes are apart)
-        holders = {"ground", *info["below"], *info["leaning"]}
-        shift = clear_overlaps(world, oid, [b for b in context if b not in holders], fp.contact_tol, fp.max_shift)
-        if shift is not None:
-            pose = pose.copy()
-            pose[:3, 3] += shift
-            world.set_pose(oid, pose)
-            rec["proxy_clear"] = [_round(v) for v in shift]
 
     def touching() -> list[str]:
         return sorted(world.distances(oid, context, fp.contact_tol))
@@ -646,6 +638,17 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         return t["robust"]
 
     best = attempt("none", pose)
+    if not best["ok"] and fp.clear:
+        # out of what it neither stands nor leans on, where its convex pieces overlap it (its mesh is clear of
+        # it): the simulator shoves it out at once; the remaining starts are taken from there
+        holders = {"ground", *info["below"], *info["leaning"]}
+        world.set_pose(oid, pose)
+        shift = clear_overlaps(world, oid, [b for b in context if b not in holders], fp.contact_tol, fp.max_shift)
+        if shift is not None:
+            pose = pose.copy()
+            pose[:3, 3] += shift
+            rec["proxy_clear"] = [_round(v) for v in shift]
+            best = attempt("clear", pose)
     if not best["ok"]:
         starts = fa.resting_candidates(pose, info["normals"], info["com"], info["up"], fp.max_stable_angle)
         for start, angle in [c for c in starts if c[1] > 0.5][: fp.max_candidates]:

@@ -37,7 +37,10 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    the floor barely moves horizontally), it turned at
    most ``max_turn`` and it still touches a supporter the graph names. The
    starts, in order: the corrected pose (remedy ``none``, or the paper's
-   ``extra_frames`` / ``damping``); the object's other resting poses within
+   ``extra_frames`` / ``damping``); where its convex pieces overlap what it
+   neither stands nor leans on (its mesh clear of it), the corrected pose moved
+   sideways out of that overlap (``clear``), which every later start is then
+   taken from; the object's other resting poses within
    ``max_stable_angle``, nearest first, at most ``max_candidates`` of them
    (``stable``); a run with high damping and rolling friction whose resting
    pose is then settled again at normal settings (``damped``); when none of
@@ -182,12 +185,14 @@ class FaithfulParams(Params):
     retry_rolling_friction
         Rolling and spinning friction of the ``damped`` retry.
     clear
-        Before settling, move an object horizontally out of the objects it neither stands nor leans on where its
-        collision shape overlaps them deeper than ``contact_tol``, if a move of at most ``max_shift`` does
-        (:func:`~phiscene.assembly.settle.clear_overlaps`); every start is then taken from there. The penetration
-        stage works on the meshes, and convex pieces reach beyond them: a potted plant's foliage overlapping a
-        curtain in the simulator, though its mesh is clear of it, is knocked over by the simulator's
-        separation before gravity acts. The move is recorded (``proxy_clear``).
+        Remedy ``clear``: when the corrected pose is rejected, move the object horizontally out of the objects it
+        neither stands nor leans on where its collision shape overlaps them deeper than ``contact_tol``, if a move
+        of at most ``max_shift`` does (:func:`~phiscene.assembly.settle.clear_overlaps`), settle it from there, and
+        take every later start from there. The penetration stage works on the meshes, and convex pieces reach
+        beyond them: a potted plant's foliage overlapping a curtain in the simulator, though its mesh is clear of
+        it, is knocked over by the simulator's separation before gravity acts. A start that overlaps and is
+        accepted all the same is kept (a chair whose pieces reach into the table it stands at is nudged, not
+        moved out). The move is recorded (``proxy_clear``).
     max_shift
         Remedy ``shifted``: an object whose every start went farther than this (m) or lost its supporters, or none
         of whose starts came to rest level (turned past ``max_turn`` or still moving), is restarted from the
