@@ -15,6 +15,7 @@ import argparse
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from phiscene.levelling import LevelParams, angle_deg, estimate_up
 from phiscene.scene import load_scene
@@ -37,17 +38,13 @@ def levelling_error(path: Path, params: LevelParams) -> tuple[float, float]:
     return angle_deg(true_up, [0.0, 0.0, 1.0]), angle_deg(estimate.up, true_up)
 
 
-def _value(text: str) -> float | int:
-    return int(text) if text.lstrip("-").isdigit() else float(text)
-
-
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("results", nargs="?", default="results")
     ap.add_argument("--suite", default="clutter")
     ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE", help="LevelParams overrides")
     args = ap.parse_args(argv)
-    params = LevelParams.from_dict({k: _value(v) for k, v in (s.split("=", 1) for s in args.set)})
+    params = LevelParams.from_dict({k: yaml.safe_load(v) for k, v in (s.split("=", 1) for s in args.set)})
     errors = []
     print(f"{'scene':12s} {'tilt':>6s} {'error':>6s}")
     for path in tilted_scenes(Path(args.results), args.suite):

@@ -324,23 +324,6 @@ class BulletWorld:
         for _ in range(frames * self.settings.substeps):
             self.p.stepSimulation()
 
-    def deepest_overlaps(self, name: str, others: list[str], depth: float) -> dict[str, tuple[float, np.ndarray]]:
-        """Where body ``name`` overlaps each of ``others`` deeper than ``depth`` (m): the deepest point's signed
-        distance (negative) and its unit normal (3,) pointing from the other body towards ``name``.
-
-        Bodies overlapping less (or not in the world) are left out.
-        """
-        out: dict[str, tuple[float, np.ndarray]] = {}
-        a = self.bodies[name].uid
-        for o in others:
-            if o not in self.bodies:
-                continue
-            pts = [c for c in self.p.getClosestPoints(a, self.bodies[o].uid, 0.0) if c[8] < -depth]
-            if pts:
-                c = min(pts, key=lambda c: c[8])
-                out[o] = (float(c[8]), np.asarray(c[7], dtype=float))
-        return out
-
     def contacts(self, name_a: str, name_b: str | None = None) -> list[dict]:
         """Contact points of body ``name_a`` (with ``name_b`` only, if given).
 
@@ -388,17 +371,31 @@ class BulletWorld:
         """Reset the friction and damping of body ``name`` to the world's settings."""
         self._surface(self.bodies[name].uid)
 
-    def distances(self, name: str, others: list[str], max_distance: float) -> dict[str, float]:
-        """Smallest signed distance (m) from body ``name`` to each of ``others`` within ``max_distance``.
-
-        Bodies farther than ``max_distance`` (or not in the world) are left out.
-        """
-        out: dict[str, float] = {}
+    def _nearest_points(self, name: str, others: list[str], max_distance: float) -> dict:
+        """Per body of ``others`` within ``max_distance`` (m) of body ``name``: Bullet's closest-point record with
+        the smallest signed distance (negative = overlap). Bodies farther (or not in the world) are left out."""
+        out = {}
         a = self.bodies[name].uid
         for o in others:
             if o not in self.bodies:
                 continue
             pts = self.p.getClosestPoints(a, self.bodies[o].uid, max_distance)
             if pts:
-                out[o] = float(min(c[8] for c in pts))
+                out[o] = min(pts, key=lambda c: c[8])
         return out
+
+    def distances(self, name: str, others: list[str], max_distance: float) -> dict[str, float]:
+        """Smallest signed distance (m) from body ``name`` to each of ``others`` within ``max_distance``.
+
+        Bodies farther than ``max_distance`` (or not in the world) are left out.
+        """
+        return {o: float(c[8]) for o, c in self._nearest_points(name, others, max_distance).items()}
+
+    def deepest_overlaps(self, name: str, others: list[str], depth: float) -> dict[str, tuple[float, np.ndarray]]:
+        """Where body ``name`` overlaps each of ``others`` deeper than ``depth`` (m): the deepest point's signed
+        distance (negative) and its unit normal (3,) pointing from the other body towards ``name``.
+
+        Bodies overlapping less (or not in the world) are left out.
+        """
+        return {o: (float(c[8]), np.asarray(c[7], dtype=float))
+                for o, c in self._nearest_points(name, others, 0.0).items() if c[8] < -depth}
