@@ -11,6 +11,14 @@ Only ``open3d.visualization.draw_plotly*`` is unusable in such a process;
 calling it raises :class:`RuntimeError` saying why.
 
 Set ``PHISCENE_OPEN3D_FULL_IMPORT=1`` to import open3d unchanged.
+
+open3d 0.19+ runs its parallel loops on oneAPI TBB, which ignores
+``OMP_NUM_THREADS`` and takes every core. Two workflow jobs running ICP or
+raycasting side by side on two cores then each wait for the other's spinning
+workers: a clutter metrics job took 30 s beside another where it takes 20 s
+alone. :func:`open3d` therefore bounds open3d's threads to the job's budget
+(:func:`limit_threads`, from ``OMP_NUM_THREADS`` as :func:`phiscene.runner.set_threads`
+sets it).
 """
 
 from __future__ import annotations
@@ -43,11 +51,36 @@ def _placeholder(name: str) -> types.ModuleType:
     return mod
 
 
+def limit_threads(o3d, threads: int | None = None) -> None:
+    """Bound open3d's TBB worker threads to ``threads`` (default: ``OMP_NUM_THREADS``; unset leaves TBB's default).
+
+    Parameters
+    ----------
+    o3d
+        The imported ``open3d`` module.
+    threads
+        Most threads open3d may use, the calling thread included.
+    """
+    if threads is None:
+        from phiscene.runner import thread_budget
+
+        threads = thread_budget()
+    setter = getattr(o3d.utility, "set_max_threads", None)  # open3d >= 0.19
+    if threads > 0 and setter is not None:
+        setter(max(1, int(threads)))
+
+
 def open3d():
-    """The ``open3d`` module, imported once without its plotly/dash visualiser (see the module docstring)."""
+    """The ``open3d`` module, imported once without its plotly/dash visualiser, its threads bounded by the job's budget.
+
+    See the module docstring.
+    """
     if "open3d" in sys.modules or os.environ.get("PHISCENE_OPEN3D_FULL_IMPORT") == "1":
+        first = "open3d" not in sys.modules
         import open3d as o3d
 
+        if first:
+            limit_threads(o3d)
         return o3d
     added = [name for name in _WEB_MODULES if name not in sys.modules]
     for name in added:
@@ -58,4 +91,5 @@ def open3d():
         for name in added:
             if isinstance(sys.modules.get(name), types.ModuleType) and sys.modules[name].__spec__ is None:
                 del sys.modules[name]
+    limit_threads(o3d)
     return o3d

@@ -299,8 +299,9 @@ def instance_labels(scene: Scene, camera: dict) -> np.ndarray:
     labels : (H, W) int32
         Index into ``scene.objects`` of the object hit first, -1 for the ground and for no hit.
     """
-    import open3d as o3d
+    from phiscene.o3d import open3d
 
+    o3d = open3d()
     W, H = int(camera["width"]), int(camera["height"])
     cast = o3d.t.geometry.RaycastingScene()
     for o in scene.objects:  # geometry ids 0 .. n - 1 in object order

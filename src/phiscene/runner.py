@@ -15,6 +15,12 @@ from phiscene.errors import PhisceneError
 log = logging.getLogger("phiscene")
 
 
+def thread_budget() -> int:
+    """This process's thread budget as :func:`set_threads` left it (``OMP_NUM_THREADS``); -1 (every core) if unset."""
+    value = os.environ.get("OMP_NUM_THREADS", "")
+    return int(value) if value.isdigit() and int(value) > 0 else -1
+
+
 def set_threads(threads: int) -> None:
     """Limit every thread pool (BLAS, OpenMP, torch, open3d, libigl) of this process to ``threads``.
 
@@ -29,6 +35,12 @@ def set_threads(threads: int) -> None:
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(threads)
+    # open3d's TBB pool ignores OMP_NUM_THREADS; phiscene.o3d bounds it on import, and here if already imported
+    o3d = sys.modules.get("open3d")
+    if o3d is not None:
+        from phiscene.o3d import limit_threads
+
+        limit_threads(o3d, threads)
     # torch reads OMP_NUM_THREADS when it is first imported; importing it here (1.5 s) would slow every job
     torch = sys.modules.get("torch")
     if torch is not None:

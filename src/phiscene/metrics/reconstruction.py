@@ -121,6 +121,9 @@ def _as_points(points, name: str) -> np.ndarray:
 def nearest_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Euclidean distance from each point of ``a`` to its nearest point of ``b`` (k-d tree).
 
+    The query runs on as many threads as the job's budget (``OMP_NUM_THREADS``, set by
+    :func:`phiscene.runner.set_threads`; every core where it is unset).
+
     Parameters
     ----------
     a : (n, 3) float
@@ -133,7 +136,9 @@ def nearest_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     from scipy.spatial import cKDTree
 
     a, b = _as_points(a, "a"), _as_points(b, "b")
-    d, _ = cKDTree(b).query(a, k=1, workers=-1)
+    from phiscene.runner import thread_budget
+
+    d, _ = cKDTree(b).query(a, k=1, workers=thread_budget())
     return np.asarray(d, dtype=float)
 
 
