@@ -156,3 +156,27 @@ def test_votes_weigh_area_to_the_power(power):
     share = areas["slab"] ** power / sum(a ** power for a in areas.values())
     assert est.tilt_deg == pytest.approx(angle_deg(expected, [0, 0, 1]), abs=0.01)
     assert est.tilt_deg == pytest.approx(6.0 * share, abs=0.1)
+
+
+def test_estimate_is_the_mode_with_most_votes_not_the_mean_of_all():
+    # one large board leaning 30 deg about x (its face is the heaviest vote) and two small boxes tilted 2 and 4 deg
+    # about y: the votes form two groups 30 deg apart, farther than the inlier cone (10 deg). The estimate is the
+    # weighted mean of the group that holds more votes (the two boxes). Started from the mean of all votes alone,
+    # the mean shift ends on the board, whose weight pulls that mean within its cone
+    def tilted(mesh, angle, axis):
+        mesh.apply_transform(trimesh.transformations.rotation_matrix(np.radians(angle), axis))
+        return mesh
+
+    board = tilted(trimesh.creation.box([1.2, 1.2, 0.02]).subdivide().subdivide(), 30.0, [1, 0, 0])
+    c1 = tilted(trimesh.creation.box([0.2, 0.2, 0.2]).subdivide().subdivide(), 2.0, [0, 1, 0])
+    c2 = tilted(trimesh.creation.box([0.2, 0.2, 0.2]).subdivide().subdivide(), 4.0, [0, 1, 0])
+    est = estimate_up({"board": board, "c1": c1, "c2": c2}, [0, 0, 1], LevelParams())
+    assert all(est.votes[o]["kind"] == "plane" for o in ("board", "c1", "c2"))
+    assert est.votes["board"]["weight"] > est.votes["c1"]["weight"] + est.votes["c2"]["weight"]
+    ups = {o: np.asarray(est.votes[o]["up"]) for o in ("c1", "c2")}
+    expected = sum(est.votes[o]["weight"] * ups[o] for o in ups)
+    assert angle_deg(est.up, expected) < 0.01
+    assert angle_deg(est.up, [0, 0, 1]) == pytest.approx(3.0, abs=0.3)  # between 2 and 4 deg, about y
+    assert [o for o, v in est.votes.items() if v["inlier"]] == ["c1", "c2"]
+    mean = sum(est.votes[o]["weight"] * np.asarray(est.votes[o]["up"]) for o in est.votes)
+    assert angle_deg(mean, est.votes["board"]["up"]) < 10.0
