@@ -312,3 +312,48 @@ def test_params_are_checked(tmp_path):
 def test_registry_is_per_suite():
     assert template_names("contact") == ["stack", "leaning", "bridge", "containment", "tabletop"]
     assert all(callable(f) for f in TEMPLATES["contact"].values())
+
+
+def test_raised_cameras_see_what_the_configured_view_hides(tmp_path):
+    # a 20 cm cube behind a 70 cm wall 50 cm nearer the camera: hidden at the configured 35 deg and at 45 (a line
+    # of sight from its near top edge clears the wall only above tan(el) = (0.7 - 0.2) / 0.4), seen from higher up
+    from phiscene.render import (
+        RenderParams,
+        camera_elevation,
+        camera_for,
+        hidden_objects,
+        instance_labels,
+        raised_cameras,
+    )
+
+    params = RenderParams(width=160, height=120)
+    az = np.radians(params.azimuth_deg)
+    toward = np.array([np.cos(az), np.sin(az), 0.0])  # horizontal direction from the cube towards the camera
+    wall = trimesh.creation.box([0.04, 1.2, 0.7])
+    wall.apply_transform(trimesh.transformations.rotation_matrix(az, [0, 0, 1]))
+    scene = Scene([SceneObject("cube", save_mesh(trimesh.creation.box([0.2] * 3), tmp_path / "cube.glb"),
+                               make_pose(translation=[0, 0, 0.1])),
+                   SceneObject("wall", save_mesh(wall, tmp_path / "wall.glb"),
+                               make_pose(translation=0.5 * toward + 0.35 * np.array([0, 0, 1.0])))])
+    configured = camera_for(scene, params)
+    assert camera_elevation(configured) == pytest.approx(35.0, abs=1e-6)
+    assert hidden_objects(scene, instance_labels(scene, configured), 10) == ["cube"]
+    raised = raised_cameras(scene, params)
+    assert [round(camera_elevation(c), 6) for c in raised] == [45.0, 55.0, 65.0]
+    seen = [not hidden_objects(scene, instance_labels(scene, c), 10) for c in raised]
+    assert seen[0] is False and seen[-1] is True
+
+
+def test_scene_hidden_from_the_configured_view_is_built_from_a_raised_one(tmp_path, cache):
+    # a camera 20 deg below the horizon sees only the ground slab: every attempt hides every object, and the
+    # scene is built from the first raised view that sees them all (at or above the horizon), not refused
+    params = {**FAST, "templates": ["stack"], "max_attempts": 1,
+              "render": {**FAST["render"], "elevation_deg": -20.0}}
+    out = tmp_path / "low"
+    build_scene(out, "contact", 0, params, cache)
+    camera = read_camera(out / "reference" / "camera.json")
+    from phiscene.render import camera_elevation, hidden_objects, instance_labels
+
+    assert camera_elevation(camera) >= 0.0
+    scene = load_scene(out / "gt" / "scene.json")
+    assert hidden_objects(scene, instance_labels(scene, camera), 10) == []

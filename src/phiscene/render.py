@@ -158,6 +158,42 @@ def camera_for(scene: Scene, params: RenderParams) -> dict:
     return look_at_camera(eye, target, params.width, params.height, params.fov_y_deg, params.near, params.far)
 
 
+#: :func:`raised_cameras`: elevations tried above the configured one (deg), in order, and the steepest one.
+RAISED_ELEVATIONS = (10.0, 20.0, 30.0)
+MAX_ELEVATION = 75.0
+
+
+def raised_cameras(scene: Scene, params: RenderParams) -> list[dict]:
+    """The cameras of :func:`camera_for` from :data:`RAISED_ELEVATIONS` above the configured elevation (capped at
+    :data:`MAX_ELEVATION`, duplicates dropped), same azimuth: looking down more steeply, the nearer objects hide
+    less of the ones behind them.
+
+    Returns
+    -------
+    list of camera dicts, lowest first
+    """
+    from dataclasses import replace
+
+    elevations = []
+    for extra in RAISED_ELEVATIONS:
+        el = min(params.elevation_deg + extra, MAX_ELEVATION)
+        if el > params.elevation_deg and el not in elevations:
+            elevations.append(el)
+    return [camera_for(scene, replace(params, elevation_deg=el)) for el in elevations]
+
+
+def camera_elevation(camera: dict) -> float:
+    """Elevation of a camera dict's eye above its target, seen from the target (deg)."""
+    d = np.asarray(camera["eye"], dtype=float) - np.asarray(camera["target"], dtype=float)
+    return float(np.degrees(np.arctan2(d[2], np.hypot(d[0], d[1]))))
+
+
+def hidden_objects(scene: Scene, labels: np.ndarray, min_pixels: int) -> list[str]:
+    """Ids of the objects that cover fewer than ``min_pixels`` pixels of an :func:`instance_labels` image (H, W)."""
+    counts = np.bincount(labels[labels >= 0].ravel(), minlength=len(scene.objects))
+    return [o.id for o, c in zip(scene.objects, counts) if c < min_pixels]
+
+
 def look_at_camera(eye: np.ndarray, target: np.ndarray, width: int, height: int, fov_y_deg: float, near: float,
                    far: float) -> dict:
     """The camera dict of a pinhole camera at ``eye`` looking at ``target`` with world z up.

@@ -51,9 +51,12 @@ from phiscene.params import Params
 from phiscene.proxies import ProxyParams
 from phiscene.render import (
     RenderParams,
+    camera_elevation,
     camera_for,
+    hidden_objects,
     instance_labels,
     labels_to_colors,
+    raised_cameras,
     render,
     save_png,
     segmentation_colors,
@@ -174,8 +177,13 @@ def _write_meshes(placements: list[Placement], order: np.ndarray, mesh_dir: Path
 
 
 def _attempt(suite: str, template: str, n_objects: int, library: tuple, rng: np.random.Generator,
-             p: BenchParams, mesh_dir: Path, cache_dir: Path) -> tuple[GroundTruth | None, str | None, dict | None,
-                                                                        tuple | None]:
+             p: BenchParams, mesh_dir: Path, cache_dir: Path, raised: bool = False
+             ) -> tuple[GroundTruth | None, str | None, dict | None, tuple | None]:
+    """One sampled, simulated and photographed scene, and what is wrong with it (``None``: accepted).
+
+    The reference camera is the configured one; with ``raised``, the cameras of
+    :func:`~phiscene.render.raised_cameras` instead, the first from which no object is hidden.
+    """
     try:
         placements = TEMPLATES[suite][template](library, n_objects, rng, p.template)
     except TemplateError as exc:
@@ -188,13 +196,18 @@ def _attempt(suite: str, template: str, n_objects: int, library: tuple, rng: np.
     gt = ground_truth(scene, p.sim, p.proxies, cache_dir, p.gt, intended)
     if gt.problem:
         return gt, gt.problem, None, None
-    camera = camera_for(gt.scene, p.render)
-    rgb = render(gt.scene, camera, shadow=p.render.shadow, light_direction=p.render.light_direction)
-    labels = instance_labels(gt.scene, camera)
-    counts = np.bincount(labels[labels >= 0].ravel(), minlength=len(scene.objects))
-    hidden = [o.id for o, c in zip(gt.scene.objects, counts) if c < p.render.min_visible_pixels]
+    cameras = raised_cameras(gt.scene, p.render) if raised else [camera_for(gt.scene, p.render)]
+    if not cameras:
+        return gt, f"no raised view (the configured elevation is already {p.render.elevation_deg:g} deg)", None, None
+    for camera in cameras:
+        labels = instance_labels(gt.scene, camera)
+        hidden = hidden_objects(gt.scene, labels, p.render.min_visible_pixels)
+        if not hidden:
+            break
     if hidden:
-        return gt, f"hidden in the reference view: {', '.join(hidden)} (< {p.render.min_visible_pixels} px)", None, None
+        view = "raised reference views" if raised else "reference view"
+        return gt, f"hidden in the {view}: {', '.join(hidden)} (< {p.render.min_visible_pixels} px)", None, None
+    rgb = render(gt.scene, camera, shadow=p.render.shadow, light_direction=p.render.light_direction)
     return gt, None, camera, (rgb, labels)
 
 
@@ -239,7 +252,7 @@ def build_scene(out_dir: Path, suite: str, index: int, params: dict, cache_dir: 
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
     try:
-        reasons = []
+        reasons, hidden_only = [], []
         for attempt in range(p.max_attempts):
             rng = np.random.default_rng([sseed, 1, attempt])
             gt, problem, camera, images = _attempt(suite, template, n_objects, library, rng, p, tmp / "meshes",
@@ -248,9 +261,23 @@ def build_scene(out_dir: Path, suite: str, index: int, params: dict, cache_dir: 
                 break
             reasons.append(f"attempt {attempt}: {problem}")
             log.info("%s/%d: %s", suite, index, reasons[-1])
+            if problem.startswith("hidden"):
+                hidden_only.append(attempt)
         else:
-            raise RuntimeError(f"benchmark scene {suite}/{index} ({template}): no stable scene in {p.max_attempts} "
-                               f"attempts:\n  " + "\n  ".join(reasons))
+            # last resort, so that every scene a seed builds from the configured view stays as it is: the attempts
+            # that were stable but hid an object from the configured camera, again, seen from higher up
+            for attempt in hidden_only:
+                rng = np.random.default_rng([sseed, 1, attempt])
+                gt, problem, camera, images = _attempt(suite, template, n_objects, library, rng, p,
+                                                       tmp / "meshes", cache_dir, raised=True)
+                if problem is None:
+                    log.info("%s/%d: attempt %d taken from a raised view (elevation %.0f deg)", suite, index,
+                             attempt, camera_elevation(camera))
+                    break
+                reasons.append(f"attempt {attempt} again: {problem}")
+            else:
+                raise RuntimeError(f"benchmark scene {suite}/{index} ({template}): no stable scene in "
+                                   f"{p.max_attempts} attempts:\n  " + "\n  ".join(reasons))
         _write_outputs(tmp, gt, camera, images, p, suite, index, template, sseed, attempt)
         _replace_dir(tmp, out_dir)
     finally:
