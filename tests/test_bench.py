@@ -23,7 +23,19 @@ from phiscene.bench.groundtruth import GTParams, ground_truth, release
 from phiscene.bench.templates import TEMPLATES, template_names
 from phiscene.meshes import save_mesh
 from phiscene.proxies import ProxyParams, proxy_for_mesh
-from phiscene.render import colors_to_labels, load_png, project, read_camera, render_instance_mask
+from phiscene.render import (
+    RenderParams,
+    camera_elevation,
+    camera_for,
+    colors_to_labels,
+    hidden_objects,
+    instance_labels,
+    load_png,
+    project,
+    raised_cameras,
+    read_camera,
+    render_instance_mask,
+)
 from phiscene.scene import Scene, SceneObject, load_scene
 from phiscene.schemas import read_json, validate
 from phiscene.sim.settings import SimSettings
@@ -317,15 +329,6 @@ def test_registry_is_per_suite():
 def test_raised_cameras_see_what_the_configured_view_hides(tmp_path):
     # a 20 cm cube behind a 70 cm wall 50 cm nearer the camera: hidden at the configured 35 deg and at 45 (a line
     # of sight from its near top edge clears the wall only above tan(el) = (0.7 - 0.2) / 0.4), seen from higher up
-    from phiscene.render import (
-        RenderParams,
-        camera_elevation,
-        camera_for,
-        hidden_objects,
-        instance_labels,
-        raised_cameras,
-    )
-
     params = RenderParams(width=160, height=120)
     az = np.radians(params.azimuth_deg)
     toward = np.array([np.cos(az), np.sin(az), 0.0])  # horizontal direction from the cube towards the camera
@@ -352,8 +355,6 @@ def test_scene_hidden_from_the_configured_view_is_built_from_a_raised_one(tmp_pa
     out = tmp_path / "low"
     build_scene(out, "contact", 0, params, cache)
     camera = read_camera(out / "reference" / "camera.json")
-    from phiscene.render import camera_elevation, hidden_objects, instance_labels
-
     assert camera_elevation(camera) >= 0.0
     scene = load_scene(out / "gt" / "scene.json")
     assert hidden_objects(scene, instance_labels(scene, camera), 10) == []

@@ -69,6 +69,10 @@ log = logging.getLogger(__name__)
 #: Bump when the benchmark generator changes in a way that changes its output.
 BENCH_VERSION = 1
 
+#: Start of an attempt's problem when it was at rest but the reference camera did not see every object
+#: (:func:`build_scene` retries those from raised views).
+HIDDEN = "hidden in the"
+
 
 @dataclass(frozen=True)
 class BenchParams(Params):
@@ -206,7 +210,7 @@ def _attempt(suite: str, template: str, n_objects: int, library: tuple, rng: np.
             break
     if hidden:
         view = "raised reference views" if raised else "reference view"
-        return gt, f"hidden in the {view}: {', '.join(hidden)} (< {p.render.min_visible_pixels} px)", None, None
+        return gt, f"{HIDDEN} {view}: {', '.join(hidden)} (< {p.render.min_visible_pixels} px)", None, None
     rgb = render(gt.scene, camera, shadow=p.render.shadow, light_direction=p.render.light_direction)
     return gt, None, camera, (rgb, labels)
 
@@ -261,7 +265,7 @@ def build_scene(out_dir: Path, suite: str, index: int, params: dict, cache_dir: 
                 break
             reasons.append(f"attempt {attempt}: {problem}")
             log.info("%s/%d: %s", suite, index, reasons[-1])
-            if problem.startswith("hidden"):
+            if problem.startswith(HIDDEN):
                 hidden_only.append(attempt)
         else:
             # last resort, so that every scene a seed builds from the configured view stays as it is: the attempts
