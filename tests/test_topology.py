@@ -313,6 +313,56 @@ def test_geometric_plank_flat_on_ground_does_not_lean(tmp_path):
     assert g.pairs() == {("ground", "wall"), ("ground", "plank")}
 
 
+def sunk_plank_specs(angle_deg=30.0, sink=0.05, short=0.03, length=0.6, thick=0.03):
+    """A plank at ``angle_deg`` from the floor, its low end sunk ``sink`` m into it, its upper face passing
+    ``short`` m beside the top edge of a 20 cm box it leans on (a depth error pulled it away)."""
+    phi = math.radians(angle_deg)
+    R = Rotation.from_euler("y", -phi).as_matrix()  # the plank's length (local x) rises towards +x
+    axis, up = R[:, 0], R[:, 2]
+    low = np.array([0.0, 0.0, -sink])  # the bottom edge of the low end
+    centre = low + axis * length / 2 + up * thick / 2
+    # the box edge the plank's bottom face would touch: on the line through `low` along `axis`, at z = 0.2
+    edge_x = (0.2 + sink) / math.tan(phi)
+    box_centre = [edge_x + 0.1 + short / math.sin(phi), 0.0, 0.1]
+    return [("box", box([0.2, 0.3, 0.2]), make_pose(translation=box_centre)),
+            ("plank", box([length, 0.2, thick]), make_pose(R, centre))]
+
+
+def test_geometric_plank_sunk_into_the_floor_still_leans_on_its_box(tmp_path):
+    # 25 cm of the plank lie within the floor's contact tolerance, so the floor alone seems to hold it;
+    # resting on its lowest samples, it turns 30 deg (closed form) to lie down: it leans, on the box it falls onto
+    g = topology.infer(make_scene(tmp_path, sunk_plank_specs()), "geometric")
+    assert {e.pair: e.relation for e in g.edges if e.target == "plank"} == {
+        ("ground", "plank"): "supports", ("box", "plank"): "leans_on"}
+    assert g.order == ["box", "plank"]
+    assert g.meta["objects"]["plank"]["fall"] == pytest.approx(30.0, abs=1.5)
+
+
+def test_geometric_plank_far_from_the_wall_plane_leans_on_it(tmp_path):
+    # a plank 30 deg off vertical, 12 cm short of the wall plane x = 0.5 (farther than any contact tolerance)
+    from phiscene.scene import Plane
+
+    specs = lean_specs(30.0)[1:]
+    specs[0][2][0, 3] -= 0.12
+    scene = make_scene(tmp_path, specs)
+    scene.structure.append(Plane("wall_0", "wall", (-1.0, 0.0, 0.0), 0.5))
+    g = topology.infer(scene, "geometric")
+    rel = {e.pair: e.relation for e in g.edges if e.target == "plank"}
+    assert rel == {("ground", "plank"): "supports", ("wall_0", "plank"): "leans_on"}
+    assert g.meta["objects"]["plank"]["fall"] == pytest.approx(60.0, abs=2.5)  # the pivot is a sample, 1 cm apart
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_geometric_tilted_box_beside_another_does_not_lean(tmp_path, seed):
+    # a rotation error tilts a box 8 deg onto its neighbour: it turns 8 deg to lie flat, an input error, no lean
+    tilt = Rotation.from_euler("y", -8.0, degrees=True).as_matrix()
+    specs = [("big", box([0.3, 0.3, 0.4]), make_pose(translation=[0, 0, 0.2])),
+             ("small", box([0.2, 0.2, 0.2]), make_pose(tilt, [0.262, 0, 0.1 + 0.1 * math.sin(math.radians(8))]))]
+    g = topology.infer(make_scene(tmp_path, degrade(specs, seed, trans=0.003, rot_deg=1.0)), "geometric")
+    assert g.pairs() == {("ground", "big"), ("ground", "small")}
+    assert g.meta["objects"]["small"]["fall"] == pytest.approx(8.0, abs=2.0)
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_geometric_box_in_tray_does_not_touch_ground(tmp_path, seed):
     scene = make_scene(tmp_path, degrade(tray_specs(), seed, trans=0.008))

@@ -45,7 +45,15 @@ contact. An edge ``B -> A`` means B carries part of A's weight.
    plank leaning on a wall keeps the ground and the wall); so do the scene's
    wall planes (``Scene.structure``) that samples above the support touch
    (:func:`wall_leaning`). Side contacts of a held object are ignored (boxes
-   touching side by side).
+   touching side by side). An object held only within the tolerance is
+   still leaning when it tips on the samples that touch (within
+   ``lean_band`` of the lowest gap) and would turn at least
+   ``lean_fall_deg`` to lie down (:func:`phiscene.topology.leaning.tipping`:
+   a plank at 35 deg on the floor, not a box tilted by a rotation error).
+   A leaning object with no side contact or wall within the tolerance leans
+   on what it falls onto when turned about its resting edge
+   (:func:`phiscene.topology.leaning.tipping_partner`; confidence
+   ``0.5 * (1 - turned / fall)``): a depth error left it centimetres away.
 8. **Fallback.** An object without any support sample gets one edge of
    confidence ``fallback_confidence``, as the paper's MLLM prompt does for
    undetermined support: from the object whose upward surface it passes
@@ -85,6 +93,7 @@ from phiscene.topology.contacts import (
 )
 from phiscene.topology.floor import floor_standing
 from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph
+from phiscene.topology.leaning import tipping, tipping_partner
 from phiscene.topology.order import finalize
 from phiscene.topology.params import BackendParams
 
@@ -133,6 +142,16 @@ class GeometricParams(BackendParams):
     fallback_confidence
         Confidence of fallback edges (no contact at all) and of edges to objects that A
         merely passes into.
+    lean_band
+        The resting test (:func:`phiscene.topology.leaning.tipping`): samples within this (m) of their
+        supporter's lowest gap touch it.
+    lean_fall_deg
+        An object that tips on its touching samples and turns at least this far (deg) before lying down is
+        leaning, not tilted by a rotation error (measured on the clutter suite's inputs: leaning objects turn
+        18 to 64 deg, tilted ones at most 14).
+    lean_step_deg, lean_hit
+        The partner sweep (:func:`phiscene.topology.leaning.tipping_partner`): angle step (deg) and the distance
+        (m) at which a turned sample touches another object.
     floor_reach
         Floor furniture (a chair, a table, a bed: :mod:`phiscene.topology.floor`) whose bottom is within this
         distance (m) of the ground stands on the ground, not on higher objects it overlaps (0 = no prior).
@@ -159,6 +178,10 @@ class GeometricParams(BackendParams):
     com_margin_abs: float = 0.01
     com_margin_rel: float = 0.05
     fallback_confidence: float = 0.2
+    lean_band: float = 0.01
+    lean_fall_deg: float = 20.0
+    lean_step_deg: float = 2.0
+    lean_hit: float = 0.015
     floor_reach: float = 0.15
     seed: int = 0
 
@@ -499,7 +522,12 @@ def supporters_of(a: Body, contacts: ObjectContacts, ancestors: dict[str, set[st
     idx = np.concatenate([c.index for c in kept.values()])
     dist, direction = hull_offset(a.points[idx, :2], a.com[:2])
     margin = max(params.com_margin_abs, params.com_margin_rel * a.size)
-    info.update(stable=bool(dist <= margin), com_outside=round(max(dist, 0.0), 6), fallback=False)
+    tip = tipping(a, list(kept.values()), params.lean_band, a.spacing)
+    leans = tip.distance > margin and tip.fall >= params.lean_fall_deg
+    if dist <= margin and leans:  # held within the tolerance, yet it stands far off its resting pose
+        dist, direction = tip.distance, tip.direction
+    info.update(stable=bool(dist <= margin), com_outside=round(max(dist, 0.0), 6), fallback=False,
+                fall=round(tip.fall, 3))
     if dist <= margin:
         return edges, info
     support_z = float(np.mean(a.points[idx, 2]))
@@ -520,6 +548,16 @@ def supporters_of(a: Body, contacts: ObjectContacts, ancestors: dict[str, set[st
                                  f"{len(c)} side contact samples hold the centre of mass, "
                                  f"{100 * dist:.1f} cm outside the support below"))
     edges += wall_leaning(a, planes, direction, support_z, tols[GROUND], dist, params)
+    if leans and not any(e.relation == "leans_on" for e in edges):
+        names = [k for k in bodies if k != a.id and k not in kept and a.id not in ancestors.get(k, ())]
+        found = tipping_partner(a, tip, bodies, names, planes, params.lean_step_deg, params.lean_hit,
+                                tip.pivot[2] + params.lean_band)
+        if found is not None:
+            name, angle = found
+            edges.append(SupportEdge(name, a.id, "leans_on", 0.5 * (1.0 - angle / tip.fall),
+                                     f"tips {angle:.0f} deg about its resting edge onto {name} "
+                                     f"(it would turn {tip.fall:.0f} deg to lie down)"))
+            info["tips_onto"] = name
     return edges, info
 
 
