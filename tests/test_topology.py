@@ -338,6 +338,17 @@ def test_geometric_plank_sunk_into_the_floor_still_leans_on_its_box(tmp_path):
     assert g.meta["objects"]["plank"]["fall"] == pytest.approx(30.0, abs=1.5)
 
 
+@pytest.mark.parametrize("angle", [25.0, 35.0])
+def test_geometric_plank_resting_on_a_box_edge_leans_on_it(tmp_path, angle):
+    # one end on the floor, its underside on the box's top edge: the box holds it up from below, yet on the floor
+    # alone it would turn `angle` (closed form) to lie down, so it leans on the box; a bridge lies level on each
+    g = topology.infer(make_scene(tmp_path, sunk_plank_specs(angle, sink=0.0, short=0.0)), "geometric")
+    assert {e.pair: e.relation for e in g.edges if e.target == "plank"} == {
+        ("ground", "plank"): "supports", ("box", "plank"): "leans_on"}
+    bridge = topology.infer(make_scene(tmp_path / "bridge", bridge_specs()), "geometric")
+    assert {e.relation for e in bridge.edges if e.target == "plank"} == {"supports"}
+
+
 def test_geometric_plank_far_from_the_wall_plane_leans_on_it(tmp_path):
     # a plank 30 deg off vertical, 12 cm short of the wall plane x = 0.5 (farther than any contact tolerance)
     from phiscene.scene import Plane

@@ -7,7 +7,7 @@ bumping one here after a behaviour change reruns exactly the affected jobs
 
 BENCHMARK = 5
 PROXIES = 3
-TOPOLOGY = 8
+TOPOLOGY = 9
 GROUND = 13
 METRICS = 7
 TABLES = 4

@@ -54,6 +54,10 @@ contact. An edge ``B -> A`` means B carries part of A's weight.
    on what it falls onto when turned about its resting edge
    (:func:`phiscene.topology.leaning.tipping_partner`; confidence
    ``0.5 * (1 - turned / fall)``): a depth error left it centimetres away.
+   With two or more supporters from below, an object that would tip that far
+   on its lowest supporter alone leans on the others
+   (:func:`phiscene.topology.leaning.leaned_on`: a book with one end on the
+   floor and its side on a box's edge; a bridged plank lies level on each).
 8. **Fallback.** An object without any support sample gets one edge of
    confidence ``fallback_confidence``, as the paper's MLLM prompt does for
    undetermined support: from the object whose upward surface it passes
@@ -93,7 +97,7 @@ from phiscene.topology.contacts import (
 )
 from phiscene.topology.floor import floor_standing
 from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph
-from phiscene.topology.leaning import tipping, tipping_partner
+from phiscene.topology.leaning import leaned_on, tipping, tipping_partner
 from phiscene.topology.order import finalize
 from phiscene.topology.params import BackendParams
 
@@ -498,9 +502,13 @@ def supporters_of(a: Body, contacts: ObjectContacts, ancestors: dict[str, set[st
     """
     kept, info = choose_supporters(a, contacts, ancestors, bodies, params)
     tols = contacts.tol
+    margin = max(params.com_margin_abs, params.com_margin_rel * a.size)
+    # an object A merely passes into is no evidence of leaning (a chair sunk into the box beside it)
+    leaned = [k for k in leaned_on(a, kept, params.lean_band, a.spacing, margin, params.lean_fall_deg)
+              if k not in info["intersecting"]]
     edges = []
     for name, c in kept.items():
-        relation = _support_relation(a, c, bodies.get(name), tols[name])
+        relation = "leans_on" if name in leaned else _support_relation(a, c, bodies.get(name), tols[name])
         if name in info["intersecting"]:
             conf, why = params.fallback_confidence, f"not held otherwise; {len(c)} samples inside it"
         else:
@@ -521,7 +529,6 @@ def supporters_of(a: Body, contacts: ObjectContacts, ancestors: dict[str, set[st
 
     idx = np.concatenate([c.index for c in kept.values()])
     dist, direction = hull_offset(a.points[idx, :2], a.com[:2])
-    margin = max(params.com_margin_abs, params.com_margin_rel * a.size)
     tip = tipping(a, list(kept.values()), params.lean_band, a.spacing)
     leans = tip.distance > margin and tip.fall >= params.lean_fall_deg
     if dist <= margin and leans:  # held within the tolerance, yet it stands far off its resting pose

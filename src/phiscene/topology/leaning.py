@@ -121,3 +121,22 @@ def tipping_partner(a: Body, tip: Tipping, bodies: dict[str, Body], names, plane
             if m.any() and np.isfinite(trees[n].query(q[m], distance_upper_bound=hit)[0]).any():
                 return n, float(angle)
     return None
+
+
+def leaned_on(a: Body, supports: dict[str, Contact], band: float, lever: float, margin: float,
+              fall_deg: float) -> list[str]:
+    """The supporters from below that ``a`` leans on rather than stands on.
+
+    With two or more supporters, ``a`` stands on the lowest one (the lowest median height of its contact
+    samples; ties by name); when it tips on that one's touching samples alone (:func:`tipping`: its centre of
+    mass more than ``margin`` m outside them) and would turn at least ``fall_deg`` to lie down on it, the
+    others hold it up as a wall would (a book with one end on the floor and its side on a box's edge). A plank
+    bridging two boxes lies level on each: it does not lean. Returns their names, sorted (empty otherwise).
+    """
+    if len(supports) < 2:
+        return []
+    low = min(sorted(supports), key=lambda k: float(np.median(a.points[supports[k].index, 2])))
+    tip = tipping(a, [supports[low]], band, lever)
+    if tip.distance > margin and tip.fall >= fall_deg:
+        return sorted(k for k in supports if k != low)
+    return []
