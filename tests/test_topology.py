@@ -451,6 +451,27 @@ def test_edge_scores_by_hand():
     assert s.f1 == pytest.approx(2 * 0.5 * (2 / 3) / (0.5 + 2 / 3))
 
 
+def test_relation_counts_by_hand(tmp_path):
+    from phiscene.metrics.topology import relation_counts
+    from phiscene.tables import topology_table
+
+    gt = [SupportEdge("ground", "a"), SupportEdge("a", "b", "leans_on"), SupportEdge("ground", "b"),
+          SupportEdge("a", "c", "contains")]
+    pred = [SupportEdge("ground", "a"), SupportEdge("a", "b"), SupportEdge("ground", "b"),
+            SupportEdge("a", "c", "contains"), SupportEdge("b", "c", "leans_on")]  # the last is no GT pair
+    assert relation_counts(pred, gt) == (3, 4)
+    assert relation_counts([], gt) == (0, 0)
+    # pooled over scenes in the table: 3 of 4 here, 1 of 1 in a second scene
+    objs = ["a", "b", "c"]
+    paths = [save(SupportGraph(objs, pred), tmp_path / "p0.json"),
+             save(SupportGraph(objs, [SupportEdge("ground", "a"), SupportEdge("ground", "b"),
+                                      SupportEdge("ground", "c")]), tmp_path / "p1.json")]
+    gts = [save(SupportGraph(objs, gt), tmp_path / "g0.json"),
+           save(SupportGraph(objs, [SupportEdge("ground", "a"), SupportEdge("a", "b"), SupportEdge("b", "c")]),
+                tmp_path / "g1.json")]
+    assert topology_table({"x": paths}, gts).loc["x", "relation_acc"] == pytest.approx(4 / 5)
+
+
 def test_edge_scores_empty_sets():
     assert edge_scores([], []).to_dict() == {"tp": 0, "fp": 0, "fn": 0, "precision": 1.0, "recall": 1.0, "f1": 1.0}
     s = edge_scores([], [("ground", "a")])

@@ -15,6 +15,11 @@ Edge cases (so that every score is defined):
 
 Over several scenes, :func:`micro_scores` pools the counts (every edge
 weighs the same) and :func:`macro_scores` averages the per-scene scores.
+
+The relation is scored apart (:func:`relation_counts`): of the edges both
+graphs have, how many carry the ground truth's relation (``supports``,
+``contains``, ``leans_on``, ``attached``). Grounding acts on it (a leaning
+object is not flushed onto its supporter), which the pair scores cannot see.
 """
 
 from __future__ import annotations
@@ -110,6 +115,25 @@ def macro_scores(preds: Sequence, gts: Sequence) -> dict[str, float]:
     mean = (lambda xs: float(sum(xs) / n)) if n else (lambda xs: float("nan"))
     return {"precision": mean([s.precision for s in per]), "recall": mean([s.recall for s in per]),
             "f1": mean([s.f1 for s in per])}
+
+
+def relation_counts(pred, gt) -> tuple[int, int]:
+    """``(same, matched)``: how many of the edges both graphs have (the same ``(from, to)``) carry GT's relation.
+
+    ``pred`` and ``gt`` are :class:`~phiscene.topology.graph.SupportGraph` (their kept edges) or iterables of
+    :class:`~phiscene.topology.graph.SupportEdge`.
+    """
+    relations = {e.pair: e.relation for e in getattr(gt, "edges", gt)}
+    matched = [(e.relation, relations[e.pair]) for e in getattr(pred, "edges", pred) if e.pair in relations]
+    return sum(a == b for a, b in matched), len(matched)
+
+
+def file_relation_counts(pred_path, gt_path) -> tuple[int, int]:
+    """:func:`relation_counts` of a predicted topology JSON against a GT topology JSON (validated on load)."""
+    from phiscene.topology.graph import load
+
+    gt = load(gt_path)
+    return relation_counts(load(pred_path, scene_ids=gt.object_ids), gt)
 
 
 def file_scores(pred_path, gt_path) -> EdgeScores:
