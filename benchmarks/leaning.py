@@ -20,7 +20,6 @@ normal) or towards the centre of the object it leans on.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
@@ -30,6 +29,7 @@ from scipy.spatial.transform import Rotation
 
 from phiscene.metrics.pose import object_centre
 from phiscene.scene import load_scene
+from phiscene.topology.graph import load
 from phiscene.transforms import decompose
 
 
@@ -42,8 +42,8 @@ def split_rotation(pose: np.ndarray, reference: np.ndarray, direction: np.ndarra
 
 
 def _relations(path: Path) -> dict[tuple[str, str], str]:
-    """``(from, to) -> relation`` of a topology JSON's kept edges."""
-    return {(e["from"], e["to"]): e["relation"] for e in json.loads(Path(path).read_text())["edges"]}
+    """``(from, to) -> relation`` of a topology JSON's kept edges (validated on load)."""
+    return {e.pair: e.relation for e in load(path).edges}
 
 
 def main(argv: list[str]) -> None:

@@ -285,7 +285,7 @@ def topology_table(files: dict[str, list[str | Path]], gt_files: list[str | Path
     ``n_failed`` and left out of the sums (see the module notes).
     """
     from phiscene.failures import FailedInput
-    from phiscene.metrics.topology import file_relation_counts, file_scores, scores_from_counts
+    from phiscene.metrics.topology import edge_scores, load_pair, relation_counts, scores_from_counts
 
     rows = []
     for backend, paths in files.items():
@@ -294,10 +294,11 @@ def topology_table(files: dict[str, list[str | Path]], gt_files: list[str | Path
         scores, relations = [], []
         for pred, gt in zip(paths, gt_files):
             try:
-                scores.append(file_scores(pred, gt))
-                relations.append(file_relation_counts(pred, gt))
+                graphs = load_pair(pred, gt)
             except FailedInput:
                 continue
+            scores.append(edge_scores(*graphs))
+            relations.append(relation_counts(*graphs))
         micro = scores_from_counts(sum(v.tp for v in scores), sum(v.fp for v in scores), sum(v.fn for v in scores))
         same, matched = sum(r[0] for r in relations), sum(r[1] for r in relations)
         rows.append({"backend": backend, "precision": micro.precision, "recall": micro.recall, "f1": micro.f1,

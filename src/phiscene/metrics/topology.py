@@ -128,20 +128,18 @@ def relation_counts(pred, gt) -> tuple[int, int]:
     return sum(a == b for a, b in matched), len(matched)
 
 
-def file_relation_counts(pred_path, gt_path) -> tuple[int, int]:
-    """:func:`relation_counts` of a predicted topology JSON against a GT topology JSON (validated on load)."""
+def load_pair(pred_path, gt_path) -> tuple:
+    """``(pred, gt)``: a predicted topology JSON and a GT topology JSON as
+    :class:`~phiscene.topology.graph.SupportGraph`, both validated on load (the prediction against GT's objects)."""
     from phiscene.topology.graph import load
 
     gt = load(gt_path)
-    return relation_counts(load(pred_path, scene_ids=gt.object_ids), gt)
+    return load(pred_path, scene_ids=gt.object_ids), gt
 
 
 def file_scores(pred_path, gt_path) -> EdgeScores:
     """Scores of one predicted topology JSON against a GT topology JSON (both validated on load)."""
-    from phiscene.topology.graph import load
-
-    gt = load(gt_path)
-    return edge_scores(load(pred_path, scene_ids=gt.object_ids), gt)
+    return edge_scores(*load_pair(pred_path, gt_path))
 
 
 def score_pairs(pairs: Iterable[tuple]) -> EdgeScores:
