@@ -26,7 +26,8 @@ preceded by the up-axis convention of the source (y-up files become z-up), a rot
 camera's viewing direction +y (x is the camera's right), and a translation that puts the ground plane at
 ``z = 0``. The ground (:func:`floor_height`) is where the objects standing on it stand: the median of the bottoms
 of the objects with nothing beneath them, within ``floor_band`` of the lowest (the feet of the furniture, or the
-table in a table-top photo). Depth errors move objects along the camera's ray, which looks down: the lowest point
+table in a table-top photo), each bottom taken where the object would rest on its nearest resting facet
+(``floor_rest_deg``), not at the corner a rotation error tilts down. Depth errors move objects along the camera's ray, which looks down: the lowest point
 of the scene belongs to the object sunk deepest, and putting it on the ground would lift everything else (by
 4 to 16 cm on the ``clutter`` suite's initial scenes). The median moves the floor-standing objects least in total.
 """
@@ -77,6 +78,14 @@ class LevelParams(Params):
     floor_band
         Ground height (:func:`floor_height`): objects with nothing beneath them whose bottoms lie within this
         height (m) of the lowest one stand on the ground; 0 = the lowest point of the scene.
+    floor_rest_deg
+        Each standing object's bottom is taken where it would rest (:func:`resting_bottom`): turned, about its
+        centre of mass, onto the resting facet of its convex hull nearest to facing down, when that facet is
+        within this angle (the turn grounding's flush makes, ``assembly.faithful.max_flush_angle``); 0 = its
+        lowest point as it came. A rotation error tilts an object about its centre, so its lowest corner sinks
+        below its base by about half its width times the tilt: a table-top slab 2.5 m wide tilted 2.6 degrees
+        has its corner 4 cm below its base; with that corner as the ground, flushing the slab lowered it and
+        everything on it by 4 cm (``custom_viga``).
     """
 
     _label = "levelling parameters"
@@ -90,6 +99,7 @@ class LevelParams(Params):
     candidates: int = 1500
     seed: int = 0
     floor_band: float = 0.25
+    floor_rest_deg: float = 20.0
 
     def check(self) -> None:
         """Angles in (0, 90) degrees, shares in (0, 1], positive counts (``ValueError``)."""
@@ -98,6 +108,9 @@ class LevelParams(Params):
                 raise ValueError(f"levelling parameter {key!r} must be in (0, 90) degrees, got {getattr(self, key)}")
         if not 0.0 < self.plane_share <= 1.0:
             raise ValueError(f"levelling parameter 'plane_share' must be in (0, 1], got {self.plane_share}")
+        if not 0.0 <= self.floor_rest_deg < 90.0:
+            raise ValueError(f"levelling parameter 'floor_rest_deg' must be in [0, 90) degrees, got "
+                             f"{self.floor_rest_deg}")
         if self.box_weight < 0 or self.candidates < 1 or self.floor_band < 0 or self.weight_power < 0:
             raise ValueError("levelling parameters 'box_weight', 'weight_power' and 'floor_band' must be >= 0 and "
                              "'candidates' >= 1")
@@ -304,14 +317,59 @@ def rotation_between(a, b) -> np.ndarray:
 
 #: Share of an object's footprint another object must cover to count as beneath it (:func:`floor_height`).
 BENEATH_SHARE = 0.25
+#: Vertex cap of the hull whose resting facets place a standing object's bottom (:func:`resting_bottom`; the
+#: hull of a 30k-face reconstruction has thousands of vertices, and enumerating resting poses scales with them).
+RESTING_HULL_VERTICES = 256
 
 
-def floor_height(parts: list[np.ndarray], band: float) -> float:
+def resting_bottom(points: np.ndarray, max_angle_deg: float) -> float:
+    """Height of an object's lowest point once it rests on its nearest resting facet (z up).
+
+    The object (the convex hull of ``points``, a uniform solid) is turned about its centre of mass by the smallest
+    rotation that makes its resting facet nearest to facing down face straight down
+    (:func:`phiscene.assembly.faithful.resting_candidates`), when that facet is within ``max_angle_deg``; else,
+    or when ``max_angle_deg`` is 0, it stays as it is.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+        The object's vertices, levelled (z up).
+    max_angle_deg
+        Largest turn (deg).
+
+    Returns
+    -------
+    The lowest z of the turned hull (m).
+    """
+    from phiscene.assembly.faithful import resting_candidates, resting_normals
+    from phiscene.proxies import capped_hull
+
+    points = np.asarray(points, dtype=float)
+    low = float(points[:, 2].min())
+    if max_angle_deg <= 0:
+        return low
+    try:
+        hull = trimesh.convex.convex_hull(capped_hull(trimesh.Trimesh(vertices=points, process=False),
+                                                      RESTING_HULL_VERTICES))
+    except Exception:  # noqa: BLE001 - flat or degenerate (a poster's quad): it rests as it is
+        return low
+    if not hull.is_volume:
+        return low
+    found = resting_candidates(np.eye(4), resting_normals(hull.vertices), np.asarray(hull.center_mass),
+                               np.array([0.0, 0.0, 1.0]), max_angle_deg)
+    if not found:
+        return low
+    turned = found[0][0]
+    return float((np.asarray(hull.vertices) @ turned[:3, :3].T + turned[:3, 3])[:, 2].min())
+
+
+def floor_height(parts: list[np.ndarray], band: float, rest_deg: float = 0.0) -> float:
     """Height of the ground under a levelled scene (z up): where the objects standing on it stand.
 
     An object stands on the ground unless another one is beneath it: covering at least ``BENEATH_SHARE`` of its
     bounding-box footprint with a top below its mid-height (a book on a table; a chair tucked under a table
-    is not on it). Of those, the ones whose bottoms lie within ``band`` of the lowest bottom are taken (a poster
+    is not on it). Its bottom is where it would rest (:func:`resting_bottom`, within ``rest_deg``; 0 = its lowest
+    point). Of those, the ones whose bottoms lie within ``band`` of the lowest bottom are taken (a poster
     on a wall has nothing beneath it either), and the ground is the median of their bottoms.
 
     Parameters
@@ -320,6 +378,8 @@ def floor_height(parts: list[np.ndarray], band: float) -> float:
         Each object's vertices, levelled (z up).
     band
         Height band above the lowest standing object (m); 0 = the lowest point of the scene.
+    rest_deg
+        Largest turn onto a resting facet (deg; :attr:`LevelParams.floor_rest_deg`).
 
     Returns
     -------
@@ -327,8 +387,10 @@ def floor_height(parts: list[np.ndarray], band: float) -> float:
     """
     lo = np.array([p.min(axis=0) for p in parts])
     hi = np.array([p.max(axis=0) for p in parts])
-    if band <= 0 or len(parts) < 2:
+    if band <= 0:
         return float(lo[:, 2].min())
+    if len(parts) < 2:
+        return resting_bottom(parts[0], rest_deg)
     mid = 0.5 * (lo[:, 2] + hi[:, 2])
     area = np.maximum(np.prod(hi[:, :2] - lo[:, :2], axis=1), 1e-12)
     standing = []
@@ -338,11 +400,12 @@ def floor_height(parts: list[np.ndarray], band: float) -> float:
         beneath = (overlap >= BENEATH_SHARE * area[i]) & (hi[:, 2] < mid[i])
         beneath[i] = False
         standing.append(not beneath.any())
-    bottoms = lo[np.array(standing), 2]
+    bottoms = np.array([resting_bottom(parts[i], rest_deg) for i in range(len(parts)) if standing[i]])
     return float(np.median(bottoms[bottoms <= bottoms.min() + band]))
 
 
-def levelling_transform(parts: list[np.ndarray], up, forward=None, floor_band: float = 0.0) -> np.ndarray:
+def levelling_transform(parts: list[np.ndarray], up, forward=None, floor_band: float = 0.0,
+                        floor_rest_deg: float = 0.0) -> np.ndarray:
     """The rigid transform (4, 4) that levels a scene: ``up`` -> +z, ``forward`` -> +y, the ground at z = 0.
 
     Parameters
@@ -356,6 +419,8 @@ def levelling_transform(parts: list[np.ndarray], up, forward=None, floor_band: f
         minimal rotation's heading).
     floor_band
         :func:`floor_height`'s band (m); 0 = the lowest point on the ground.
+    floor_rest_deg
+        :func:`floor_height`'s largest turn onto a resting facet (deg; 0 = the objects as they came).
     """
     R = rotation_between(up, [0.0, 0.0, 1.0])
     if forward is not None:
@@ -366,5 +431,5 @@ def levelling_transform(parts: list[np.ndarray], up, forward=None, floor_band: f
             R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ R
     T = np.eye(4)
     T[:3, :3] = R
-    T[2, 3] = -floor_height([np.asarray(p, dtype=float) @ R.T for p in parts], floor_band)
+    T[2, 3] = -floor_height([np.asarray(p, dtype=float) @ R.T for p in parts], floor_band, floor_rest_deg)
     return T

@@ -434,7 +434,7 @@ def foundation_scene(gt: Scene, camera: dict, labels: np.ndarray, params: Founda
     meshes = {o.id: o.world_mesh() for o in tilted.objects}
     estimate = estimate_up(meshes, [0.0, 0.0, 1.0], params.level)
     T_level = levelling_transform([np.asarray(m.vertices) for m in meshes.values()], estimate.up,
-                                  floor_band=params.level.floor_band)
+                                  floor_band=params.level.floor_band, floor_rest_deg=params.level.floor_rest_deg)
     T_level[2, 3] += gt.ground_height
     levelled = _transformed(tilted, T_level)
     T_res = T_level @ T_tilt

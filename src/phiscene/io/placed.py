@@ -240,7 +240,8 @@ def level_objects(objects: list[PlacedObject], params: PlacedParams, camera: Cam
     up = estimate.up if estimate is not None else np.array([0.0, 0.0, 1.0])
     forward = None if camera is None else A @ (np.asarray(camera.target, float) - np.asarray(camera.eye, float))
     parts = [np.asarray(m.vertices) for m in meshes.values()]
-    T = levelling_transform(parts, up, forward, params.levelling.floor_band) @ _h(A)
+    T = levelling_transform(parts, up, forward, params.levelling.floor_band,
+                             params.levelling.floor_rest_deg) @ _h(A)
     return Levelling(T, estimate)
 
 
