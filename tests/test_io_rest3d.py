@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 from phiscene.errors import InputError
 from phiscene.io.placed import PlacedParams, level_objects, read_placed_dir
 from phiscene.io.rest3d import import_rest3d, read_rest3d, reference_up, scene_ids
-from phiscene.levelling import LevelParams, angle_deg, estimate_up, floor_height, levelling_transform
+from phiscene.levelling import LevelParams, angle_deg, estimate_up, floor_height, levelling_transform, resting_bottom
 from phiscene.scene import load_scene
 from tests.rest3d_fixture import objects, write_scene
 
@@ -132,6 +132,41 @@ def test_floor_is_where_the_standing_objects_stand():
     T = levelling_transform(parts, [0.0, 0.0, 1.0], floor_band=0.25)
     np.testing.assert_allclose(T[:3, :3], np.eye(3), atol=1e-12)
     assert T[2, 3] == pytest.approx(-expected)
+
+
+def _tilted_slab(length: float, thickness: float, tilt_deg: float, centre_z: float) -> np.ndarray:
+    """Vertices of a box ``length`` x 1 x ``thickness`` m turned ``tilt_deg`` about y through its centre."""
+    slab = trimesh.creation.box((length, 1.0, thickness))
+    slab.apply_transform(trimesh.transformations.rotation_matrix(np.radians(tilt_deg), [0, 1, 0]))
+    slab.apply_translation([0.0, 0.0, centre_z])
+    return np.asarray(slab.vertices)
+
+
+@pytest.mark.parametrize("tilt", [1.5, 2.6, 8.0])
+def test_floor_is_where_a_tilted_slab_would_rest(tilt):
+    # a table-top slab 2.5 m long, 14 cm thick, centre at 0.5 m, tilted by a rotation error: its corner sinks
+    # 1.25 sin(t) + 0.07 cos(t) below the centre, but turned flush about its centre (its resting facet, the bottom
+    # face) its bottom is 0.07 below it. A plate above it does not stand on the ground (the rule for what is
+    # beneath compares the slab's box top, its highest corner, with the plate's mid-height)
+    slab = _tilted_slab(2.5, 0.14, tilt, 0.5)
+    corner = 0.5 - 1.25 * np.sin(np.radians(tilt)) - 0.07 * np.cos(np.radians(tilt))
+    assert slab[:, 2].min() == pytest.approx(corner)
+    assert resting_bottom(slab, 20.0) == pytest.approx(0.43, abs=1e-9)
+    assert resting_bottom(slab, 0.0) == pytest.approx(corner)  # 0: as it came
+    plate = _box((-0.2, -0.2, 0.78), (0.2, 0.2, 0.81))
+    assert floor_height([slab, plate], 0.25, 20.0) == pytest.approx(0.43, abs=1e-9)
+    assert floor_height([slab, plate], 0.25) == pytest.approx(corner)
+    T = levelling_transform([slab, plate], [0.0, 0.0, 1.0], floor_band=0.25, floor_rest_deg=20.0)
+    assert T[2, 3] == pytest.approx(-0.43, abs=1e-9)
+
+
+def test_resting_bottom_beyond_the_turn_or_flat_is_the_lowest_point():
+    # tilted 30 deg, past the 20 deg turn: it rests as it came; a poster's quad has no volume to rest on
+    slab = _tilted_slab(1.0, 0.1, 30.0, 1.0)
+    assert resting_bottom(slab, 20.0) == pytest.approx(slab[:, 2].min())
+    quad = np.array([[0.0, 0.0, 1.2], [0.6, 0.0, 1.2], [0.6, 0.0, 1.8], [0.0, 0.0, 1.8]])
+    assert resting_bottom(quad, 20.0) == pytest.approx(1.2)
+    assert resting_bottom(np.array([[0.0, 0.0, 0.3], [1.0, 0.0, 0.2], [2.0, 0.0, 0.1]]), 20.0) == pytest.approx(0.1)
 
 
 @pytest.mark.parametrize("power", [1.0, 0.5, 0.0])

@@ -27,9 +27,10 @@ camera's viewing direction +y (x is the camera's right), and a translation that 
 ``z = 0``. The ground (:func:`floor_height`) is where the objects standing on it stand: the median of the bottoms
 of the objects with nothing beneath them, within ``floor_band`` of the lowest (the feet of the furniture, or the
 table in a table-top photo), each bottom taken where the object would rest on its nearest resting facet
-(``floor_rest_deg``), not at the corner a rotation error tilts down. Depth errors move objects along the camera's ray, which looks down: the lowest point
-of the scene belongs to the object sunk deepest, and putting it on the ground would lift everything else (by
-4 to 16 cm on the ``clutter`` suite's initial scenes). The median moves the floor-standing objects least in total.
+(``floor_rest_deg``), not at the corner a rotation error tilts down. Depth errors move objects along the camera's
+ray, which looks down: the lowest point of the scene belongs to the object sunk deepest, and putting it on the
+ground would lift everything else (by 4 to 16 cm on the ``clutter`` suite's initial scenes). The median moves the
+floor-standing objects least in total.
 """
 
 from __future__ import annotations
@@ -341,6 +342,8 @@ def resting_bottom(points: np.ndarray, max_angle_deg: float) -> float:
     -------
     The lowest z of the turned hull (m).
     """
+    from scipy.spatial import QhullError
+
     from phiscene.assembly.faithful import resting_candidates, resting_normals
     from phiscene.proxies import capped_hull
 
@@ -349,11 +352,13 @@ def resting_bottom(points: np.ndarray, max_angle_deg: float) -> float:
     if max_angle_deg <= 0:
         return low
     try:
-        hull = trimesh.convex.convex_hull(capped_hull(trimesh.Trimesh(vertices=points, process=False),
-                                                      RESTING_HULL_VERTICES))
-    except Exception:  # noqa: BLE001 - flat or degenerate (a poster's quad): it rests as it is
+        with np.errstate(invalid="ignore", divide="ignore"):  # a flat hull's centre of mass divides by 0
+            hull = trimesh.convex.convex_hull(capped_hull(trimesh.Trimesh(vertices=points, process=False),
+                                                          RESTING_HULL_VERTICES))
+            flat = not hull.is_volume  # a poster's quad: it rests as it is
+    except (QhullError, ValueError):  # collinear points: nothing to rest on
         return low
-    if not hull.is_volume:
+    if flat:
         return low
     found = resting_candidates(np.eye(4), resting_normals(hull.vertices), np.asarray(hull.center_mass),
                                np.array([0.0, 0.0, 1.0]), max_angle_deg)
