@@ -28,6 +28,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from phiscene.metrics.pose import object_centre
+from phiscene.metrics.topology import relations
 from phiscene.scene import load_scene
 from phiscene.topology.graph import load
 from phiscene.transforms import decompose
@@ -39,11 +40,6 @@ def split_rotation(pose: np.ndarray, reference: np.ndarray, direction: np.ndarra
     rv = Rotation.from_matrix(decompose(pose)[0] @ decompose(reference)[0].T).as_rotvec()
     across = np.array([-direction[1], direction[0], 0.0])
     return tuple(math.degrees(abs(float(rv @ a))) for a in (direction, across, np.array([0.0, 0.0, 1.0])))
-
-
-def _relations(path: Path) -> dict[tuple[str, str], str]:
-    """``(from, to) -> relation`` of a topology JSON's kept edges (validated on load)."""
-    return {e.pair: e.relation for e in load(path).edges}
 
 
 def main(argv: list[str]) -> None:
@@ -60,9 +56,9 @@ def main(argv: list[str]) -> None:
     rows = []
     for s in scenes:
         base = args.results / "scenes" / args.suite / s
-        gt_edges = _relations(base / "gt/topology.json")
+        gt_edges = relations(load(base / "gt/topology.json"))
         topo = args.results / "topology" / args.backend / args.suite / f"{s}.json"
-        pred = _relations(topo) if topo.is_file() else {}
+        pred = relations(load(topo)) if topo.is_file() else {}
         lean = [k for k, r in gt_edges.items() if r == "leans_on"]
         total += len(lean)
         found += sum(pred.get(k) == "leans_on" for k in lean)

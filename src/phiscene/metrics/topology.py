@@ -117,14 +117,20 @@ def macro_scores(preds: Sequence, gts: Sequence) -> dict[str, float]:
             "f1": mean([s.f1 for s in per])}
 
 
+def relations(graph) -> dict[tuple[str, str], str]:
+    """``(from, to) -> relation`` of a :class:`~phiscene.topology.graph.SupportGraph`'s kept edges (or of an
+    iterable of :class:`~phiscene.topology.graph.SupportEdge`)."""
+    return {e.pair: e.relation for e in getattr(graph, "edges", graph)}
+
+
 def relation_counts(pred, gt) -> tuple[int, int]:
     """``(same, matched)``: how many of the edges both graphs have (the same ``(from, to)``) carry GT's relation.
 
     ``pred`` and ``gt`` are :class:`~phiscene.topology.graph.SupportGraph` (their kept edges) or iterables of
     :class:`~phiscene.topology.graph.SupportEdge`.
     """
-    relations = {e.pair: e.relation for e in getattr(gt, "edges", gt)}
-    matched = [(e.relation, relations[e.pair]) for e in getattr(pred, "edges", pred) if e.pair in relations]
+    truth = relations(gt)
+    matched = [(e.relation, truth[e.pair]) for e in getattr(pred, "edges", pred) if e.pair in truth]
     return sum(a == b for a, b in matched), len(matched)
 
 

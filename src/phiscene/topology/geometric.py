@@ -531,7 +531,7 @@ def supporters_of(a: Body, contacts: ObjectContacts, ancestors: dict[str, set[st
     idx = np.concatenate([c.index for c in kept.values()])
     dist, direction = hull_offset(a.points[idx, :2], a.com[:2])
     tip = tipping(a, list(kept.values()), params.lean_band, a.spacing)
-    leans = tip.distance > margin and tip.fall >= params.lean_fall_deg
+    leans = tip.leans(margin, params.lean_fall_deg)
     if dist <= margin and leans:  # held within the tolerance, yet it stands far off its resting pose
         dist, direction = tip.distance, tip.direction
     info.update(stable=bool(dist <= margin), com_outside=round(max(dist, 0.0), 6), fallback=False,

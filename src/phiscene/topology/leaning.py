@@ -44,6 +44,11 @@ class Tipping:
     pivot: np.ndarray
     fall: float
 
+    def leans(self, margin: float, fall_deg: float) -> bool:
+        """Whether the object leans: its centre of mass more than ``margin`` m outside the touching samples and a
+        fall of at least ``fall_deg`` before it lies down (a smaller one is a rotation error)."""
+        return self.distance > margin and self.fall >= fall_deg
+
 
 def tipping(a: Body, supports: list[Contact], band: float, lever: float) -> Tipping:
     """How ``a`` rests on the samples within ``band`` (m) of each supporter's lowest gap.
@@ -136,7 +141,6 @@ def leaned_on(a: Body, supports: dict[str, Contact], band: float, lever: float, 
     if len(supports) < 2:
         return []
     low = min(sorted(supports), key=lambda k: float(np.median(a.points[supports[k].index, 2])))
-    tip = tipping(a, [supports[low]], band, lever)
-    if tip.distance > margin and tip.fall >= fall_deg:
+    if tipping(a, [supports[low]], band, lever).leans(margin, fall_deg):
         return sorted(k for k in supports if k != low)
     return []
