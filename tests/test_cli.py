@@ -52,6 +52,16 @@ def test_bad_input_is_one_line(tmp_path):
     assert not (tmp_path / "out/scene.json").exists()
 
 
+def test_bad_unit_scale_is_one_line(tmp_path):
+    """A unit scale that is not a finite number > 0 is refused in one line by both importers, before any reading."""
+    for command in ("import-sam3d", "import-placed"):
+        for value in ("-1", "0", "nan"):
+            res = phiscene(command, str(tmp_path / "in"), str(tmp_path / "out"), "--unit-scale", value, cwd=tmp_path)
+            assert res.returncode == 1, res.stderr
+            assert res.stderr.strip().count("\n") == 0, res.stderr
+            assert "--unit-scale" in res.stderr and "> 0" in res.stderr
+
+
 def test_ground_command_uses_the_method_settings(tmp_path):
     cube = save_mesh(trimesh.creation.box([0.1, 0.1, 0.1]), tmp_path / "meshes/cube.glb")
     save_scene(Scene([SceneObject("cube", cube, make_pose(translation=[0, 0, 0.08]))]), tmp_path / "in/scene.json")

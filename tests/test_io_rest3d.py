@@ -8,7 +8,7 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from phiscene.errors import InputError
-from phiscene.io.placed import PlacedParams, level_objects, read_placed_dir
+from phiscene.io.placed import Camera, PlacedObject, PlacedParams, import_placed, level_objects, read_placed_dir
 from phiscene.io.rest3d import import_rest3d, read_rest3d, reference_up, scene_ids
 from phiscene.levelling import LevelParams, angle_deg, estimate_up, floor_height, levelling_transform, resting_bottom
 from phiscene.scene import load_scene
@@ -67,6 +67,28 @@ def test_import_reproduces_placements_and_levels(tmp_path):
     # camera eye was 1.8 m above the feet in the levelled fixture
     assert cam["eye"][2] == pytest.approx(1.8, abs=0.02)
     assert load_scene(tmp_path / "out" / "initial" / "scene.json").ids == scene.ids
+
+
+def test_unit_scale_imports_a_millimetre_scene_as_the_metric_one(tmp_path):
+    """The same scene in millimetres: refused before anything is written, then imported with unit_scale 0.001
+    exactly as the metric scene (same levelling, same poses and extents, same camera)."""
+    write_scene(tmp_path, "s", (10.0, 5.0))
+    data = read_rest3d(tmp_path, "s", "sam3d")
+    metric = import_placed(data.objects, tmp_path / "m", PlacedParams(), data.camera)
+    mm = [PlacedObject(o.id, o.mesh.copy().apply_scale(1000.0), o.description, o.source) for o in data.objects]
+    cam = Camera(np.asarray(data.camera.eye) * 1000.0, np.asarray(data.camera.target) * 1000.0,
+                 data.camera.fov_y_deg)
+    with pytest.raises(InputError, match=r"\.glb: object is .* m across .*--unit-scale 0\.001"):
+        import_placed(mm, tmp_path / "refused", PlacedParams(), cam)
+    assert not (tmp_path / "refused").exists()
+    scaled = import_placed(mm, tmp_path / "mm", PlacedParams(unit_scale=0.001), cam)
+    for o in metric.objects:
+        assert np.allclose(scaled.get(o.id).pose, o.pose, atol=1e-6)
+        assert np.allclose(scaled.get(o.id).world_mesh().extents, o.world_mesh().extents, atol=1e-6)
+    cams = [json.loads((tmp_path / d / "reference" / "camera.json").read_text()) for d in ("m", "mm")]
+    assert np.allclose(cams[0]["eye"], cams[1]["eye"], atol=1e-6)
+    with pytest.raises(ValueError, match="unit_scale"):
+        PlacedParams.from_dict({"unit_scale": 0.0})
 
 
 def test_reference_levelling_is_the_kabsch_rotation(tmp_path):

@@ -5,7 +5,7 @@
     phiscene bench OUT_DIR [--suite contact] [--index 0] [--config ...]
     phiscene failures [RESULTS_DIR] [--why]
     phiscene import-sam3d IN_DIR OUT_DIR [--floor NX NY NZ D] [--unit-scale 1]
-    phiscene import-placed MESH_DIR OUT_DIR [--up y|z] [--placements P.json] [--no-level]
+    phiscene import-placed MESH_DIR OUT_DIR [--up y|z] [--placements P.json] [--unit-scale 1] [--no-level]
     phiscene import-rest3d ROOT SCENE OUT_DIR [--variant sam3d|ours] [--no-level]
     phiscene import-front3d ROOT OUT_DIR [--room SCENE_ID ...] [--test-rooms 1000] [--initial PATTERN]
     phiscene export SCENE_JSON OUT_DIR [--proxies P.npz] [--topology T.json] [--no-check] [--demo]
@@ -196,7 +196,11 @@ def cmd_import_sam3d(args: argparse.Namespace) -> None:
     from phiscene.io.sam3d import Sam3dParams, import_sam3d, make_floor
 
     floor = make_floor(args.floor[:3], args.floor[3], "--floor") if args.floor else None
-    scene = import_sam3d(args.in_dir, args.out_dir, floor, Sam3dParams(unit_scale=args.unit_scale))
+    try:
+        params = Sam3dParams.from_dict({"unit_scale": args.unit_scale})
+    except ValueError as exc:
+        raise PhisceneError(f"--unit-scale: {exc}") from None
+    scene = import_sam3d(args.in_dir, args.out_dir, floor, params)
     print(f"wrote {Path(args.out_dir) / 'initial' / 'scene.json'} ({len(scene)} objects, floor "
           f"{scene.meta['floor']['from']})")
 
@@ -210,9 +214,12 @@ def _report_import(scene, out_dir: str) -> None:
 def cmd_import_placed(args: argparse.Namespace) -> None:
     from phiscene.io.placed import PlacedParams, import_placed, read_placed_dir
 
+    try:
+        params = PlacedParams.from_dict({"up": args.up, "unit_scale": args.unit_scale, "level": not args.no_level})
+    except ValueError as exc:
+        raise PhisceneError(f"--unit-scale: {exc}") from None
     objects = read_placed_dir(args.mesh_dir, args.placements)
-    scene = import_placed(objects, args.out_dir, PlacedParams(up=args.up, level=not args.no_level),
-                          source={"kind": "placed", "path": str(args.mesh_dir)})
+    scene = import_placed(objects, args.out_dir, params, source={"kind": "placed", "path": str(args.mesh_dir)})
     _report_import(scene, args.out_dir)
 
 
@@ -293,6 +300,8 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("out_dir")
     pl.add_argument("--up", choices=("y", "z"), default="y", help="up-axis convention of the files (default y)")
     pl.add_argument("--placements", help="JSON {id: {pos, quat (w,x,y,z)} | 4x4} applied to each mesh")
+    pl.add_argument("--unit-scale", type=float, default=1.0,
+                    help="metres per source unit (default 1; 0.001 for millimetres, 0.01 for centimetres)")
     pl.add_argument("--no-level", action="store_true", help="trust the up convention (no gravity estimate)")
     pl.set_defaults(func=cmd_import_placed)
 

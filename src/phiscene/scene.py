@@ -393,16 +393,40 @@ def _check_placement(path: Path, index: int, obj: SceneObject, local_bounds: np.
     import trimesh
 
     world = transform_points(obj.pose, trimesh.bounds.corners(local_bounds))
-    lo, hi = world.min(axis=0), world.max(axis=0)
+    check_world_bounds(path, f"objects[{index}]", world.min(axis=0), world.max(axis=0), ground)
+
+
+def check_world_bounds(path: str | Path | None, where: str, lo: np.ndarray, hi: np.ndarray, ground: float,
+                       hint: str = "") -> None:
+    """Refuse an object whose world bounding box is implausible for a scene in metres above its ground.
+
+    Parameters
+    ----------
+    path, where
+        The file and the object field named in the error (``where`` empty: the file alone).
+    lo, hi : (3,) float
+        Corners of the object's world axis-aligned bounding box (m).
+    ground
+        Height of the ground (m).
+    hint
+        Appended to the unit messages (an importer names its option for other units).
+
+    Raises
+    ------
+    InputError
+        Larger than ``TOL.max_object_size``, reaching farther than ``TOL.max_coordinate`` from the origin, or
+        lying more than ``TOL.max_below_ground`` below the ground.
+    """
+    lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    pose_field = f"{where}.pose" if where else None
     size = float((hi - lo).max())
-    where = f"objects[{index}]"
     if size > TOL.max_object_size:
-        raise InputError(path, where, f"object is {size:.4g} m across (more than {TOL.max_object_size} m): "
-                         "units must be metres (is the scene in millimetres?)")
+        raise InputError(path, where or None, f"object is {size:.4g} m across (more than {TOL.max_object_size} m): "
+                         f"units must be metres (is the scene in millimetres?){hint}")
     reach = float(np.abs(np.concatenate([lo, hi])).max())
     if reach > TOL.max_coordinate:
-        raise InputError(path, f"{where}.pose", f"object reaches {reach:.4g} m from the origin (more than "
-                         f"{TOL.max_coordinate} m; units must be metres)")
+        raise InputError(path, pose_field, f"object reaches {reach:.4g} m from the origin (more than "
+                         f"{TOL.max_coordinate} m; units must be metres){hint}")
     if hi[2] < ground - TOL.max_below_ground:
-        raise InputError(path, f"{where}.pose", f"object lies {ground - hi[2]:.4g} m below the ground (top at "
+        raise InputError(path, pose_field, f"object lies {ground - hi[2]:.4g} m below the ground (top at "
                          f"z={hi[2]:.4g} m, ground at {ground:.4g} m; at most {TOL.max_below_ground} m is accepted)")

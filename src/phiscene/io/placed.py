@@ -32,13 +32,15 @@ from phiscene.atomic import write_json
 from phiscene.errors import InputError
 from phiscene.levelling import LevelParams, UpEstimate, angle_deg, estimate_up, levelling_transform
 from phiscene.params import Params
-from phiscene.scene import Scene, SceneObject, load_scene, save_scene
+from phiscene.scene import Scene, SceneObject, check_world_bounds, load_scene, save_scene
 from phiscene.transforms import Y_UP_TO_Z_UP, quat_wxyz_to_matrix, rigidity_error
 
 log = logging.getLogger(__name__)
 
 #: Format tag of ``import.json``.
 IMPORT_FORMAT = "phiscene.placed_import/1"
+#: What a refused import suggests for a scene in other units than metres.
+UNIT_HINT = "; pass the metres per source unit (--unit-scale 0.001 for millimetres, 0.01 for centimetres)"
 #: Mesh file suffixes read as objects.
 MESH_SUFFIXES = (".glb", ".gltf", ".ply", ".obj")
 
@@ -51,6 +53,11 @@ class PlacedParams(Params):
     ----------
     up
         Up-axis convention of the source files: ``y`` (glTF, SAM 3D Objects' GLBs) or ``z``.
+    unit_scale
+        Metres per source unit: multiplies every vertex, placement translation and camera position (1 for metric
+        output such as SAM 3D Objects'; 0.001 for millimetres, 0.01 for centimetres). A scene whose levelled
+        objects are implausible in metres (an object more than ``TOL.max_object_size`` across, or reaching
+        farther than ``TOL.max_coordinate`` from the origin) is refused before anything is written.
     level
         Estimate gravity and level the scene (false: trust the up convention).
     levelling
@@ -62,6 +69,7 @@ class PlacedParams(Params):
     _label = "import parameters"
 
     up: str = "y"
+    unit_scale: float = 1.0
     level: bool = True
     levelling: LevelParams = field(default_factory=LevelParams)
     image_width: int = 640
@@ -71,6 +79,8 @@ class PlacedParams(Params):
         """Reject an unknown up axis or image size (``ValueError``)."""
         if self.up not in ("y", "z"):
             raise ValueError(f"import parameter 'up' must be 'y' or 'z', got {self.up!r}")
+        if not (np.isfinite(self.unit_scale) and self.unit_scale > 0):
+            raise ValueError(f"import parameter 'unit_scale' must be a finite number > 0, got {self.unit_scale}")
         if self.image_width < 1 or self.image_height < 1:
             raise ValueError("import parameters 'image_width' and 'image_height' must be >= 1")
 
@@ -259,7 +269,7 @@ def import_placed(objects: list[PlacedObject], out_dir: str | Path, params: Plac
     Parameters
     ----------
     objects
-        The objects, vertices in the source frame.
+        The objects, vertices in the source frame (source units: ``params.unit_scale`` makes them metres).
     out_dir
         Output folder.
     camera
@@ -267,7 +277,13 @@ def import_placed(objects: list[PlacedObject], out_dir: str | Path, params: Plac
     source
         Free-form description of the source for ``import.json``.
     transform : (4, 4) float, optional
-        A given source -> world transform instead of the estimated levelling.
+        A given source -> world transform instead of the estimated levelling (applied after ``unit_scale``).
+
+    Raises
+    ------
+    InputError
+        An object implausible in metres once levelled (:func:`phiscene.scene.check_world_bounds`), naming its
+        file; nothing is written then.
 
     Returns
     -------
@@ -277,16 +293,21 @@ def import_placed(objects: list[PlacedObject], out_dir: str | Path, params: Plac
     from phiscene.render import look_at_camera
 
     out_dir = Path(out_dir)
+    objects, camera = in_metres(objects, camera, params.unit_scale)
     if transform is None:
         levelling = level_objects(objects, params, camera)
     else:
         levelling = Levelling(np.asarray(transform, dtype=float), None)
     T = levelling.transform
     init_dir = out_dir / "initial"
-    scene_objects = []
-    for o in objects:
+    worlds = []
+    for o in objects:  # every object checked before anything is written: a refused import leaves no output
         world = o.mesh.copy()
         world.apply_transform(T)
+        check_world_bounds(o.source, "", *world.bounds, 0.0, hint=UNIT_HINT)
+        worlds.append(world)
+    scene_objects = []
+    for o, world in zip(objects, worlds):
         centre = world.bounds.mean(axis=0)
         local = world.copy()
         local.apply_translation(-centre)
@@ -312,6 +333,18 @@ def import_placed(objects: list[PlacedObject], out_dir: str | Path, params: Plac
         "up_estimate": up_record, "objects": {o.id: o.source.name for o in objects}})
     log.info("%s: %d objects, levelled by %.2f deg", out_dir, len(objects), levelling.rotation_deg)
     return load_scene(init_dir / "scene.json")
+
+
+def in_metres(objects: list[PlacedObject], camera: Camera | None,
+              unit_scale: float) -> tuple[list[PlacedObject], Camera | None]:
+    """The objects (copies of their meshes) and the camera with every coordinate multiplied by ``unit_scale``."""
+    if unit_scale == 1.0:
+        return objects, camera
+    scaled = [PlacedObject(o.id, o.mesh.copy().apply_scale(unit_scale), o.description, o.source) for o in objects]
+    if camera is not None:
+        camera = Camera(np.asarray(camera.eye, dtype=float) * unit_scale,
+                        np.asarray(camera.target, dtype=float) * unit_scale, camera.fov_y_deg)
+    return scaled, camera
 
 
 def tilt_between(T_a: np.ndarray, T_b: np.ndarray) -> float:

@@ -108,6 +108,11 @@ class Sam3dParams(Params):
     samples_per_object: int = 2000
     seed: int = 0
 
+    def check(self) -> None:
+        """Reject a unit scale that is not a finite number > 0 (``ValueError``)."""
+        if not (np.isfinite(self.unit_scale) and self.unit_scale > 0):
+            raise ValueError(f"unit_scale must be a finite number > 0, got {self.unit_scale}")
+
 
 @dataclass(frozen=True)
 class Floor:
@@ -516,8 +521,7 @@ def import_sam3d(in_dir: str | Path, out_dir: str | Path, floor: Floor | None = 
     from phiscene.schemas import read_json
 
     in_dir, out_dir = Path(in_dir), Path(out_dir)
-    if params.unit_scale <= 0:
-        raise ValueError(f"unit_scale must be > 0, got {params.unit_scale}")
+    params.check()
     objects = read_sam3d_dir(in_dir)
     units = np.diag([params.unit_scale] * 3 + [1.0])
     cam_poses = [units @ o.pose for o in objects]
