@@ -382,6 +382,24 @@ def test_geometric_box_in_tray_does_not_touch_ground(tmp_path, seed):
     assert {e.pair: e.relation for e in g.edges}[("tray", "cup")] == "contains"
 
 
+@pytest.mark.parametrize("sink_lift", [0.02, 0.0])
+def test_geometric_tray_sunk_under_the_floor_still_holds_its_cup(tmp_path, sink_lift):
+    """A depth error put the tray 8 cm under the floor and its cup, placed with an error of its own, at the
+    floor's height inside it: raised onto the ground as grounding will raise it, the tray contains the cup; the box
+    beside the tray stays on the ground. Without the second reading (sink_lift 0) the cup stands on the ground."""
+    specs = [("tray", tray_mesh(), make_pose(translation=[0, 0, 0.03 - 0.08])),
+             ("cup", box([0.12, 0.1, 0.08]), make_pose(translation=[0.05, 0, 0.045])),
+             ("beside", box([0.1, 0.1, 0.1]), make_pose(translation=[0.32, 0, 0.05]))]
+    g = topology.infer(make_scene(tmp_path, specs), "geometric", {"sink_lift": sink_lift})
+    if sink_lift:
+        assert g.pairs() == {("ground", "tray"), ("tray", "cup"), ("ground", "beside")}
+        assert {e.pair: e.relation for e in g.edges}[("tray", "cup")] == "contains"
+        assert g.meta["raised"] == {"tray": pytest.approx(0.08, abs=1e-6)} and g.meta["reread"] == ["cup"]
+    else:
+        assert g.pairs() == {("ground", "tray"), ("ground", "cup"), ("ground", "beside")}
+        assert "raised" not in g.meta
+
+
 def test_geometric_side_by_side_boxes_do_not_support_each_other(tmp_path):
     specs = [("big", box([0.3, 0.3, 0.4]), make_pose(translation=[0, 0, 0.2])),
              ("small", box([0.2, 0.2, 0.2]), make_pose(translation=[0.252, 0, 0.1]))]

@@ -66,6 +66,11 @@ contact. An edge ``B -> A`` means B carries part of A's weight.
 9. **Floor furniture** (:mod:`phiscene.topology.floor`): a chair, table, bed or cabinet (the description's
    head noun) whose bottom is within ``floor_reach`` of the ground stands on the ground, not on the higher
    objects a depth error slid it over (a table over two chairs' seats).
+10. **Sunk floor objects** (:func:`sunk_floor_objects`): an object read as standing on the ground alone, its
+    lowest point more than ``sink_lift`` below it (a bowl or a plate a depth error put 10 cm under the floor), is
+    raised onto the ground, as grounding will raise it, and the objects read as standing on the ground alone (not
+    raised themselves) are read again: the blob at the floor's height inside the sunk bowl is in the bowl. The
+    others keep their first reading: their heights carry depth errors of their own.
 
 Relations: ``supports``; ``contains`` when the supporter rises more than
 ``tol`` above the contact and A's centre is within its xy bounds (a tray, a
@@ -92,8 +97,10 @@ from phiscene.topology.contacts import (
     aabbs_near,
     ground_contact,
     hull_offset,
+    object_seed,
     pair_contacts,
     prepare_bodies,
+    prepare_body,
 )
 from phiscene.topology.floor import floor_standing
 from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph
@@ -160,6 +167,9 @@ class GeometricParams(BackendParams):
     floor_reach
         Floor furniture (a chair, a table, a bed: :mod:`phiscene.topology.floor`) whose bottom is within this
         distance (m) of the ground stands on the ground, not on higher objects it overlaps (0 = no prior).
+    sink_lift
+        An object the first pass stands on the ground alone, its lowest point more than this (m) below the
+        ground, is raised onto it and the graph inferred again (:func:`sunk_floor_objects`; 0 = one pass).
     seed
         Seed of the surface sampling.
     """
@@ -188,6 +198,7 @@ class GeometricParams(BackendParams):
     lean_step_deg: float = 2.0
     lean_hit: float = 0.015
     floor_reach: float = 0.15
+    sink_lift: float = 0.02
     seed: int = 0
 
 
@@ -592,8 +603,79 @@ def wall_leaning(a: Body, planes, direction: np.ndarray, support_z: float, tol: 
 
 
 def infer(scene, params: GeometricParams = GeometricParams()) -> SupportGraph:
-    """Geometric support graph of ``scene`` with its placement order (see the module docstring)."""
+    """Geometric support graph of ``scene`` with its placement order (see the module docstring).
+
+    Where a floor object is sunk (:func:`sunk_floor_objects`), the support of the objects read as standing on the
+    ground beside or inside it is read again with it raised onto the ground, as grounding will raise it; the
+    graph's ``meta["raised"]`` gives the lifts (id -> m) and ``meta["reread"]`` the objects whose supporters
+    changed.
+    """
     bodies = prepare_bodies(scene, params)
+    edges, diagnostics, floor = _supporters(scene, bodies, params)
+    lifts = sunk_floor_objects(edges, bodies, scene.ground_height, params.sink_lift)
+    meta = {"params": params.to_dict(), "objects": diagnostics, "floor_standing": floor}
+    if lifts:
+        on_ground = {oid for oid, ps in _parents(edges).items() if ps == {(GROUND, "supports")} and oid not in lifts}
+        raised = dict(bodies)
+        for i, o in enumerate(scene.objects):
+            if o.id in lifts:
+                pose = np.array(o.pose, dtype=float)
+                pose[2, 3] += lifts[o.id]
+                raised[o.id] = prepare_body(o.id, o.mesh(), pose, params, seed=object_seed(params.seed, i))
+        again, diag_again, _ = _supporters(scene, raised, params)
+        # only the objects read as standing on the ground take the second reading (their neighbours' heights
+        # carry depth errors of their own: an object already on the sunk one keeps its supporter)
+        new = _parents(again)
+        reread = sorted(oid for oid in on_ground if new.get(oid, set()) != {(GROUND, "supports")})
+        edges = [e for e in edges if e.target not in reread] + [e for e in again if e.target in reread]
+        diagnostics.update({oid: diag_again[oid] for oid in reread})
+        meta.update(raised={k: round(float(v), 6) for k, v in sorted(lifts.items())}, reread=reread)
+    walls = [p.id for p in scene.structure if any(e.source == p.id for e in edges)]
+    graph = SupportGraph(objects=[GROUND] + scene.ids, edges=edges, backend="geometric", meta=meta, structure=walls)
+    return finalize(graph, areas={k: b.footprint for k, b in bodies.items()})
+
+
+def _parents(edges: list[SupportEdge]) -> dict[str, set[tuple[str, str]]]:
+    """Object id -> its (supporter, relation) pairs."""
+    out: dict[str, set[tuple[str, str]]] = {}
+    for e in edges:
+        out.setdefault(e.target, set()).add((e.source, e.relation))
+    return out
+
+
+def sunk_floor_objects(edges: list[SupportEdge], bodies: dict[str, Body], ground_height: float,
+                       sink_lift: float) -> dict[str, float]:
+    """Objects standing on the ground alone whose lowest point lies more than ``sink_lift`` below it.
+
+    A depth error moves an object along the camera's ray, which looks down: a plate, a bowl or a shelf ends
+    centimetres to decimetres under the floor (down to 19 cm on the ``clutter`` suite's inputs), while what
+    stands on it or in it, placed with errors of its own, may end at the floor's height beside or inside it: read
+    as is, it stands on the ground. Grounding raises the sunk object out of the floor before anything is put on
+    it.
+
+    Parameters
+    ----------
+    edges
+        The support edges read from the scene as it is.
+
+    Returns
+    -------
+    Object id -> lift (m): the depth of its lowest point below the ground. Empty when ``sink_lift`` is 0.
+    """
+    if sink_lift <= 0:
+        return {}
+    parents = _parents(edges)
+    lifts = {}
+    for oid, body in bodies.items():
+        depth = ground_height - float(body.bounds[0, 2])
+        if parents.get(oid) == {(GROUND, "supports")} and depth > sink_lift:
+            lifts[oid] = depth
+    return lifts
+
+
+def _supporters(scene, bodies: dict[str, Body], params: GeometricParams) -> tuple[list[SupportEdge], dict, list]:
+    """The support edges of every object of ``scene`` read from prepared ``bodies`` (before cycles are broken),
+    the per-object diagnostics and the floor-standing objects."""
     contacts = {o.id: object_contacts(bodies[o.id], bodies, scene.ground_height, params) for o in scene.objects}
     drop_mutual(contacts, bodies, params)
     ancestors = raw_ancestors(contacts, params)
@@ -604,8 +686,4 @@ def infer(scene, params: GeometricParams = GeometricParams()) -> SupportGraph:
         edges += e
         diagnostics[o.id] = info
     edges, floor = floor_standing(edges, scene, {k: b.bounds for k, b in bodies.items()}, params.floor_reach)
-    walls = [p.id for p in scene.structure if any(e.source == p.id for e in edges)]
-    graph = SupportGraph(objects=[GROUND] + scene.ids, edges=edges, backend="geometric",
-                         meta={"params": params.to_dict(), "objects": diagnostics, "floor_standing": floor},
-                         structure=walls)
-    return finalize(graph, areas={k: b.footprint for k, b in bodies.items()})
+    return edges, diagnostics, floor
