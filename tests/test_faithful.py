@@ -17,7 +17,14 @@ from scenes import box_scene, convex_proxies
 from scipy.spatial.transform import Rotation
 
 from phiscene.assembly import AssemblyParams, ground_scene
-from phiscene.assembly.faithful import carried, flush_pose, resting_candidates, resting_normals
+from phiscene.assembly.faithful import (
+    FaithfulParams,
+    carried,
+    flush_pose,
+    gross_failures,
+    resting_candidates,
+    resting_normals,
+)
 from phiscene.meshes import save_mesh
 from phiscene.metrics.pose import pose_metrics
 from phiscene.sim.settings import SimSettings
@@ -76,6 +83,27 @@ def test_tilted_box_ends_flush_near_its_input(work):
     cert = rec["objects"]["box"]["certificate"]
     assert cert["settled"] and cert["supporters_kept"] and "table" in cert["touching"]
     assert cert["joint_stable"]  # a flush box on a table stays put when the whole scene is released
+
+
+def test_a_box_that_can_only_end_far_from_its_input_is_listed_as_a_gross_failure(work):
+    """A box 1 m above the table top, nothing under it but the table: it can only drop 1 m (past onto_reach,
+    0.3 m), and the summary lists it with what happened; the table, which stays, is not listed."""
+    scene = scene_of(work, {"table": ("table", TABLE), "box": ("box", make_pose(translation=(0.0, 0.0, 1.15)))})
+    g = graph_of(scene, [("ground", "table", "supports"), ("table", "box", "supports")])
+    out, rec = run(work, scene, g)
+    assert out.get("box").pose[2, 3] == pytest.approx(0.15, abs=2e-3)  # on the table top, 1 m lower
+    assert set(rec["summary"]["gross"]) == {"box"}
+    assert "moved 1.00 m" in rec["summary"]["gross"]["box"]
+
+
+def test_gross_failure_is_past_the_stable_angle_or_the_onto_reach():
+    fp = FaithfulParams(max_stable_angle=45.0, onto_reach=0.3)
+    certs = {"kept": {"displacement": 0.29, "rotation_change": 44.0, "remedy": "none"},
+             "flipped": {"displacement": 0.1, "rotation_change": 170.0, "remedy": "closest+joint"},
+             "thrown": {"displacement": 0.31, "rotation_change": 2.0, "remedy": "closest"}}
+    got = gross_failures(certs, fp)
+    assert set(got) == {"flipped", "thrown"}
+    assert got["flipped"] == "turned 170 deg and moved 0.10 m from its input (remedy closest+joint)"
 
 
 def test_fruit_above_table_stays_and_settles(work):

@@ -160,7 +160,10 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         ``settle_translation``, ``settle_rotation``, ``displacement``, ``rotation_change``, ``seconds`` per
         stage) and a ``summary``; with ``params.faithful.enabled`` also ``flush_angle`` (and ``ray_shift``, m,
         with ``ray`` and ``eye``) and a
-        ``certificate`` per object (:func:`~phiscene.assembly.faithful.certificate`).
+        ``certificate`` per object (:func:`~phiscene.assembly.faithful.certificate`), and the summary lists the
+        lost supporters, the remedies, the objects not stable in the final release (``joint_unstable``) and
+        those that end a gross failure from their input (``gross``: id -> what happened,
+        :func:`~phiscene.assembly.faithful.gross_failures`; also logged as a warning and a progress line).
     """
     from phiscene.sim.bullet import BulletWorld
 
@@ -282,6 +285,11 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         summary["supporters_lost"] = {o: c["lost"] for o, c in certs.items() if c["lost"]}
         summary["remedies"] = {o: c["remedy"] for o, c in certs.items() if c["remedy"] != "none"}
         summary["joint_unstable"] = [o for o, c in certs.items() if c.get("joint_stable") is False]
+        summary["gross"] = fa.gross_failures(certs, params.faithful)
+        for oid, what in summary["gross"].items():
+            log.warning("%s ends far from its input: %s", oid, what)
+            if progress is not None:
+                progress(f"far from its input: {oid} {what}")
     if unsettled:
         log.warning("objects that did not meet the settling criterion: %s", ", ".join(unsettled))
     summary["attached"] = sorted(attached)
@@ -614,7 +622,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                 f"gives way when released: {gave}" if gave else ""]
         stayed = ok and not lost
         # a gross failure: turned beyond any resting pose tried, or went farther than the onto remedy moves
-        gross = turned > fp.max_stable_angle or moved > fp.onto_reach
+        gross = fa.gross_failure(moved, turned, fp)
         out = {"label": label, "result": result, "frames": frames, "gross": gross, "turned": turned,
                "ok": stayed and result.settled and robust and not gave, "lost": bool(lost), "robust": robust,
                "loaded": not gave,

@@ -1077,6 +1077,21 @@ def lost_supporters(below: list[str], leaning: list[str], touching: list[str]) -
     return lost + [p for p in leaning if p not in touching]
 
 
+def gross_failure(moved: float, turned_deg: float, fp: FaithfulParams) -> bool:
+    """Whether a motion is a gross failure: turned past ``max_stable_angle`` (beyond any resting pose tried) or
+    moved past ``onto_reach`` (farther than the ``onto`` remedy moves): a crate flipped upside down, a chair thrown
+    across the room."""
+    return turned_deg > fp.max_stable_angle or moved > fp.onto_reach
+
+
+def gross_failures(certificates: dict[str, dict], fp: FaithfulParams) -> dict[str, str]:
+    """The objects whose final pose is a gross failure from their input (:func:`gross_failure` of the certificate's
+    ``displacement`` and ``rotation_change``), each with what happened to it."""
+    return {oid: f"turned {c['rotation_change']:.0f} deg and moved {c['displacement']:.2f} m from its input "
+                 f"(remedy {c['remedy']})"
+            for oid, c in certificates.items() if gross_failure(c["displacement"], c["rotation_change"], fp)}
+
+
 def certificate(settled: bool | None, remedy: str, below: list[str], leaning: list[str], touching: list[str],
                 displacement: float, rotation_change_deg: float, flush_angle: float,
                 reason: str = "") -> dict:
