@@ -30,6 +30,7 @@ import trimesh
 
 from phiscene.atomic import write_json
 from phiscene.errors import InputError
+from phiscene.io import check_unit_scale
 from phiscene.levelling import LevelParams, UpEstimate, angle_deg, estimate_up, levelling_transform
 from phiscene.params import Params
 from phiscene.scene import Scene, SceneObject, check_world_bounds, load_scene, save_scene
@@ -79,8 +80,7 @@ class PlacedParams(Params):
         """Reject an unknown up axis or image size (``ValueError``)."""
         if self.up not in ("y", "z"):
             raise ValueError(f"import parameter 'up' must be 'y' or 'z', got {self.up!r}")
-        if not (np.isfinite(self.unit_scale) and self.unit_scale > 0):
-            raise ValueError(f"import parameter 'unit_scale' must be a finite number > 0, got {self.unit_scale}")
+        check_unit_scale(self.unit_scale)
         if self.image_width < 1 or self.image_height < 1:
             raise ValueError("import parameters 'image_width' and 'image_height' must be >= 1")
 

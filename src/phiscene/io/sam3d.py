@@ -60,6 +60,7 @@ import numpy as np
 
 from phiscene.atomic import atomic_path, write_json
 from phiscene.errors import InputError
+from phiscene.io import check_unit_scale
 from phiscene.params import Params
 from phiscene.scene import Scene, SceneObject, load_scene, save_scene
 from phiscene.transforms import (
@@ -110,8 +111,7 @@ class Sam3dParams(Params):
 
     def check(self) -> None:
         """Reject a unit scale that is not a finite number > 0 (``ValueError``)."""
-        if not (np.isfinite(self.unit_scale) and self.unit_scale > 0):
-            raise ValueError(f"unit_scale must be a finite number > 0, got {self.unit_scale}")
+        check_unit_scale(self.unit_scale)
 
 
 @dataclass(frozen=True)
