@@ -615,20 +615,22 @@ def infer(scene, params: GeometricParams = GeometricParams()) -> SupportGraph:
     lifts = sunk_floor_objects(edges, bodies, scene.ground_height, params.sink_lift)
     meta = {"params": params.to_dict(), "objects": diagnostics, "floor_standing": floor}
     if lifts:
-        on_ground = {oid for oid, ps in _parents(edges).items() if ps == {(GROUND, "supports")} and oid not in lifts}
-        raised = dict(bodies)
-        for i, o in enumerate(scene.objects):
-            if o.id in lifts:
-                pose = np.array(o.pose, dtype=float)
-                pose[2, 3] += lifts[o.id]
-                raised[o.id] = prepare_body(o.id, o.mesh(), pose, params, seed=object_seed(params.seed, i))
-        again, diag_again, _ = _supporters(scene, raised, params)
         # only the objects read as standing on the ground take the second reading (their neighbours' heights
-        # carry depth errors of their own: an object already on the sunk one keeps its supporter)
-        new = _parents(again)
-        reread = sorted(oid for oid in on_ground if new.get(oid, set()) != {(GROUND, "supports")})
-        edges = [e for e in edges if e.target not in reread] + [e for e in again if e.target in reread]
-        diagnostics.update({oid: diag_again[oid] for oid in reread})
+        # carry depth errors of their own: an object already on the sunk one keeps its supporter); none, no reading
+        on_ground = {oid for oid, ps in _parents(edges).items() if ps == {(GROUND, "supports")} and oid not in lifts}
+        reread: list[str] = []
+        if on_ground:
+            raised = dict(bodies)
+            for i, o in enumerate(scene.objects):
+                if o.id in lifts:
+                    pose = np.array(o.pose, dtype=float)
+                    pose[2, 3] += lifts[o.id]
+                    raised[o.id] = prepare_body(o.id, o.mesh(), pose, params, seed=object_seed(params.seed, i))
+            again, diag_again, _ = _supporters(scene, raised, params)
+            new = _parents(again)
+            reread = sorted(oid for oid in on_ground if new.get(oid, set()) != {(GROUND, "supports")})
+            edges = [e for e in edges if e.target not in reread] + [e for e in again if e.target in reread]
+            diagnostics.update({oid: diag_again[oid] for oid in reread})
         meta.update(raised={k: round(float(v), 6) for k, v in sorted(lifts.items())}, reread=reread)
     walls = [p.id for p in scene.structure if any(e.source == p.id for e in edges)]
     graph = SupportGraph(objects=[GROUND] + scene.ids, edges=edges, backend="geometric", meta=meta, structure=walls)
