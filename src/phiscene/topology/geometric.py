@@ -612,12 +612,13 @@ def infer(scene, params: GeometricParams = GeometricParams()) -> SupportGraph:
     """
     bodies = prepare_bodies(scene, params)
     edges, diagnostics, floor = _supporters(scene, bodies, params)
-    lifts = sunk_floor_objects(edges, bodies, scene.ground_height, params.sink_lift)
+    parents = _parents(edges)
+    lifts = sunk_floor_objects(parents, bodies, scene.ground_height, params.sink_lift)
     meta = {"params": params.to_dict(), "objects": diagnostics, "floor_standing": floor}
     if lifts:
         # only the objects read as standing on the ground take the second reading (their neighbours' heights
         # carry depth errors of their own: an object already on the sunk one keeps its supporter); none, no reading
-        on_ground = {oid for oid, ps in _parents(edges).items() if ps == {(GROUND, "supports")} and oid not in lifts}
+        on_ground = {oid for oid, ps in parents.items() if ps == ON_GROUND_ALONE and oid not in lifts}
         reread: list[str] = []
         if on_ground:
             raised = dict(bodies)
@@ -628,13 +629,17 @@ def infer(scene, params: GeometricParams = GeometricParams()) -> SupportGraph:
                     raised[o.id] = prepare_body(o.id, o.mesh(), pose, params, seed=object_seed(params.seed, i))
             again, diag_again, _ = _supporters(scene, raised, params)
             new = _parents(again)
-            reread = sorted(oid for oid in on_ground if new.get(oid, set()) != {(GROUND, "supports")})
+            reread = sorted(oid for oid in on_ground if new.get(oid, set()) != ON_GROUND_ALONE)
             edges = [e for e in edges if e.target not in reread] + [e for e in again if e.target in reread]
             diagnostics.update({oid: diag_again[oid] for oid in reread})
         meta.update(raised={k: round(float(v), 6) for k, v in sorted(lifts.items())}, reread=reread)
     walls = [p.id for p in scene.structure if any(e.source == p.id for e in edges)]
     graph = SupportGraph(objects=[GROUND] + scene.ids, edges=edges, backend="geometric", meta=meta, structure=walls)
     return finalize(graph, areas={k: b.footprint for k, b in bodies.items()})
+
+
+#: The (supporter, relation) pairs of an object standing on the ground alone (:func:`sunk_floor_objects`).
+ON_GROUND_ALONE = frozenset({(GROUND, "supports")})
 
 
 def _parents(edges: list[SupportEdge]) -> dict[str, set[tuple[str, str]]]:
@@ -645,7 +650,7 @@ def _parents(edges: list[SupportEdge]) -> dict[str, set[tuple[str, str]]]:
     return out
 
 
-def sunk_floor_objects(edges: list[SupportEdge], bodies: dict[str, Body], ground_height: float,
+def sunk_floor_objects(parents: dict[str, set[tuple[str, str]]], bodies: dict[str, Body], ground_height: float,
                        sink_lift: float) -> dict[str, float]:
     """Objects standing on the ground alone whose lowest point lies more than ``sink_lift`` below it.
 
@@ -657,8 +662,8 @@ def sunk_floor_objects(edges: list[SupportEdge], bodies: dict[str, Body], ground
 
     Parameters
     ----------
-    edges
-        The support edges read from the scene as it is.
+    parents
+        Object id -> its (supporter, relation) pairs as read from the scene as it is.
 
     Returns
     -------
@@ -666,11 +671,10 @@ def sunk_floor_objects(edges: list[SupportEdge], bodies: dict[str, Body], ground
     """
     if sink_lift <= 0:
         return {}
-    parents = _parents(edges)
     lifts = {}
     for oid, body in bodies.items():
         depth = ground_height - float(body.bounds[0, 2])
-        if parents.get(oid) == {(GROUND, "supports")} and depth > sink_lift:
+        if parents.get(oid) == ON_GROUND_ALONE and depth > sink_lift:
             lifts[oid] = depth
     return lifts
 
