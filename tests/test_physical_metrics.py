@@ -257,3 +257,34 @@ def test_deterministic(tmp_path):
     a = physical_metrics(scene, proxies, params, SIM, tmp_path / "cache")
     b = physical_metrics(scene, proxies, params, SIM, tmp_path / "cache")
     assert a == b
+
+
+@pytest.mark.parametrize("forget", [True, False])
+def test_set_pose_answers_what_a_new_world_answers(tmp_path, monkeypatch, forget):
+    """A body put back at a pose in a used world moves as the same body at that pose in a new world (the release
+    of the whole scene, the drift protocol): Bullet's kept contacts of where it rested are dropped. The oracle is
+    the new world itself; without :meth:`~phiscene.sim.bullet.BulletWorld.forget_contacts` the two part."""
+    from phiscene.inertia import rigid_props
+
+    if not forget:
+        monkeypatch.setattr(BulletWorld, "forget_contacts", lambda self, name: None)
+    sim = SimSettings()
+    mesh = box(0.06, 0.06, 0.3)
+    hulls = [np.asarray(mesh.vertices)]
+    props = rigid_props(mesh, hulls, sim.density)
+    tilt = trimesh.transformations.rotation_matrix(math.radians(6.0), [1, 0, 0])
+    start = tilt @ at(0.0, 0.0, 0.0)
+    start[2, 3] -= trimesh.transform_points(mesh.vertices, start)[:, 2].min() - 0.0005  # on its edge, 0.5 mm up
+    with BulletWorld(sim, tmp_path / "cache") as world:
+        world.add_ground(0.0)
+        world.add_body("a", hulls, start, props)
+        world.step_frames(120)  # at rest, upright, on its whole bottom face
+        world.set_pose("a", start)
+        world.step_frames(15)
+        used = world.pose("a")
+    with BulletWorld(sim, tmp_path / "cache") as world:
+        world.add_ground(0.0)
+        world.add_body("a", hulls, start, props)
+        world.step_frames(15)
+        new = world.pose("a")
+    assert np.allclose(used, new, atol=1e-9) == forget

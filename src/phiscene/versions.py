@@ -8,7 +8,7 @@ bumping one here after a behaviour change reruns exactly the affected jobs
 BENCHMARK = 6
 PROXIES = 3
 TOPOLOGY = 10
-GROUND = 13
+GROUND = 14
 METRICS = 7
 TABLES = 5
 REPORT = 1

@@ -353,8 +353,9 @@ def gives_way(world: BulletWorld, name: str, carriers: list[str], frames: int, t
     Sequential settling tests an object against a frozen context: a book leaning on a box, a plank on the edge of
     a stool, a box on a tray that overhangs its shelf, all hold there, and the whole scene collapses when it is
     released. Here the carriers (the placed objects ``name`` touches) become dynamic with ``name`` at rest on
-    them and the world runs ``frames`` frames; a body that ends farther than ``tol_pos`` (m) or ``tol_rot_deg``
-    from where it was gives way. Poses are restored and the carriers frozen again.
+    them and the world runs ``frames`` frames from new contacts, as a new world would
+    (:meth:`~phiscene.sim.bullet.BulletWorld.forget_contacts`); a body that ends farther than ``tol_pos`` (m) or
+    ``tol_rot_deg`` from where it was gives way. Poses are restored and the carriers frozen again.
 
     Parameters
     ----------
@@ -379,6 +380,8 @@ def gives_way(world: BulletWorld, name: str, carriers: list[str], frames: int, t
     try:
         for c in carriers:
             world.set_dynamic(c)
+        for b in bodies:  # released as in a new world: not on the contacts Bullet kept of their rest
+            world.forget_contacts(b)
         world.step_frames(frames)
         for b in bodies:
             moved, turned = window_motion(start[b], world.pose(b))

@@ -35,6 +35,11 @@ log = logging.getLogger(__name__)
 GROUND_HALF_THICKNESS = 0.5
 #: Half extent of the ground box in x and y (m).
 GROUND_HALF_EXTENT = 50.0
+#: pybullet's collision filter (group, mask) of a body created dynamic, and of one created static (mass 0):
+#: Bullet's DefaultFilter / AllFilter and StaticFilter / AllFilter but StaticFilter
+#: (:meth:`BulletWorld.forget_contacts`).
+FILTER_DYNAMIC = (1, -1)
+FILTER_STATIC = (2, -3)
 
 
 def hulls_obj_text(hulls: list[np.ndarray]) -> str:
@@ -271,6 +276,22 @@ class BulletWorld:
         self.p.resetBasePositionAndOrientation(b.uid, com_frame[:3, 3].tolist(),
                                           matrix_to_quat_xyzw(com_frame[:3, :3]).tolist())
         self.p.resetBaseVelocity(b.uid, [0, 0, 0], [0, 0, 0])
+        self.forget_contacts(name)
+
+    def forget_contacts(self, name: str) -> None:
+        """Drop the contacts Bullet keeps of body ``name`` (its persistent manifolds and their warm-started impulses).
+
+        Bullet builds a contact between convex shapes up one point per step and keeps it across steps and across
+        :meth:`set_pose`: a body put back where it rested in a used world stands on the full contact it had,
+        while the same pose in a new world (the release of the whole scene, the drift protocol) starts from one
+        point and may tip before the rest are found. Grounding's tests (settling, the tilt test, carriers under
+        load) must answer what a new world answers. Re-registering the body's collision filter (the defaults
+        pybullet gives a body created dynamic or static) takes it out of the broadphase and back, which destroys
+        its pairs and their manifolds.
+        """
+        b = self.bodies[name]
+        group, mask = FILTER_DYNAMIC if b.props is not None else FILTER_STATIC
+        self.p.setCollisionFilterGroupMask(b.uid, -1, group, mask)
 
     def pose(self, name: str) -> np.ndarray:
         """Current phiscene pose (4, 4) of body ``name``, scale included."""
