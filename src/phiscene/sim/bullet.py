@@ -269,7 +269,8 @@ class BulletWorld:
 
     # -- poses ----------------------------------------------------------------------
     def set_pose(self, name: str, pose: np.ndarray) -> None:
-        """Place body ``name`` at phiscene pose ``pose`` (its scale must match the body's) and zero its velocity."""
+        """Place body ``name`` at phiscene pose ``pose`` (its scale must match the body's), zero its velocity and drop
+        the contacts Bullet kept of it (:meth:`forget_contacts`): it starts as in a new world."""
         b = self.bodies[name]
         R, t, _ = decompose(pose)
         com_frame = make_pose(R, t) @ b.inertial
