@@ -363,6 +363,39 @@ def test_geometric_plank_far_from_the_wall_plane_leans_on_it(tmp_path):
     assert g.meta["objects"]["plank"]["fall"] == pytest.approx(60.0, abs=2.5)  # the pivot is a sample, 1 cm apart
 
 
+@pytest.mark.parametrize("lift", [0.12, 0.2])
+def test_geometric_floating_plank_far_from_the_wall_plane_leans_on_it(tmp_path, lift):
+    # the plank of the test above, also lifted `lift` m off the floor (out of every contact tolerance: only the
+    # fallback holds it, as a depth error leaves a leaning book): lowered onto the floor it would turn 60 deg
+    # (closed form) to lie down, and it tips onto the wall first
+    from phiscene.scene import Plane
+
+    specs = lean_specs(30.0)[1:]
+    specs[0][2][0, 3] -= 0.12
+    specs[0][2][2, 3] += lift
+    scene = make_scene(tmp_path, specs)
+    scene.structure.append(Plane("wall_0", "wall", (-1.0, 0.0, 0.0), 0.5))
+    g = topology.infer(scene, "geometric")
+    rel = {e.pair: e.relation for e in g.edges if e.target == "plank"}
+    assert rel == {("ground", "plank"): "supports", ("wall_0", "plank"): "leans_on"}
+    info = g.meta["objects"]["plank"]
+    assert info["fallback"] and info["tips_onto"] == "wall_0"
+
+
+@pytest.mark.parametrize("tilt", [0.0, 8.0])
+def test_geometric_floating_box_near_a_wall_does_not_lean(tmp_path, tilt):
+    # a box 15 cm above the floor, 5 cm from a wall, level or tilted 8 deg towards it (a rotation error): lowered onto
+    # the floor it stands, or turns 8 deg to lie flat; it falls back on the floor and leans on nothing
+    from phiscene.scene import Plane
+
+    R = Rotation.from_euler("y", tilt, degrees=True).as_matrix()
+    scene = make_scene(tmp_path, [("box", box([0.2, 0.2, 0.3]), make_pose(R, [0.33, 0.0, 0.3]))])
+    scene.structure.append(Plane("wall_0", "wall", (-1.0, 0.0, 0.0), 0.5))
+    g = topology.infer(scene, "geometric")
+    assert g.pairs() == {("ground", "box")}
+    assert g.meta["objects"]["box"]["fallback"]
+
+
 @pytest.mark.parametrize("seed", range(3))
 def test_geometric_tilted_box_beside_another_does_not_lean(tmp_path, seed):
     # a rotation error tilts a box 8 deg onto its neighbour: it turns 8 deg to lie flat, an input error, no lean

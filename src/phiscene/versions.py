@@ -7,7 +7,7 @@ bumping one here after a behaviour change reruns exactly the affected jobs
 
 BENCHMARK = 7
 PROXIES = 3
-TOPOLOGY = 10
+TOPOLOGY = 11
 GROUND = 14
 METRICS = 8
 TABLES = 5

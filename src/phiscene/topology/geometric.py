@@ -62,7 +62,12 @@ contact. An edge ``B -> A`` means B carries part of A's weight.
    confidence ``fallback_confidence``, as the paper's MLLM prompt does for
    undetermined support: from the object whose upward surface it passes
    through (too deep to count, or out the other side), else from the first
-   upward surface straight below it (an object's, or the ground).
+   upward surface straight below it (an object's, or the ground). An object
+   on that last fallback that, lowered onto that surface, would tip and turn
+   at least ``lean_fall_deg`` to lie down also leans on what it tips onto
+   (:func:`phiscene.topology.leaning.floating_tipping`): a book standing 40
+   deg off vertical that a depth error left 10 cm above the floor and away
+   from the wall it leans on.
 9. **Floor furniture** (:mod:`phiscene.topology.floor`): a chair, table, bed or cabinet (the description's
    head noun) whose bottom is within ``floor_reach`` of the ground stands on the ground, not on the higher
    objects a depth error slid it over (a table over two chairs' seats).
@@ -104,7 +109,7 @@ from phiscene.topology.contacts import (
 )
 from phiscene.topology.floor import floor_standing
 from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph
-from phiscene.topology.leaning import leaned_on, tipping, tipping_partner
+from phiscene.topology.leaning import floating_tipping, leaned_on, tipping, tipping_partner
 from phiscene.topology.order import finalize
 from phiscene.topology.params import BackendParams
 
@@ -463,14 +468,19 @@ def choose_supporters(a: Body, contacts: ObjectContacts, ancestors: dict[str, se
     return kept, info
 
 
-def _object_below(a: Body, bodies: dict[str, Body], tol: float) -> str:
-    """Fallback parent of ``a``: the first upward surface below it, looking straight down.
+def _object_below(a: Body, bodies: dict[str, Body], tol: float, ground_height: float) -> tuple[str, float]:
+    """Fallback parent of ``a``: the first upward surface below it, looking straight down, and its height.
 
     Among upward-facing samples of other objects inside ``a``'s xy bounds and
     at most ``tol`` above ``a``'s lowest point, the highest one names the
     parent (the third highest sample of each object is compared, so a stray
     sample does not decide; ties by name); the ground when there is none
     (an object below wins even if it sank below the ground plane).
+
+    Returns
+    -------
+    ``(name, height)``: the parent and the z (m) of its surface there (the compared sample; ``ground_height``
+    for the ground).
     """
     best, best_z = GROUND, -math.inf
     lo, hi = a.bounds
@@ -484,7 +494,7 @@ def _object_below(a: Body, bodies: dict[str, Body], tol: float) -> str:
             z = float(np.sort(q[:, 2])[-3])
             if z > best_z:
                 best, best_z = name, z
-    return best
+    return best, (ground_height if best == GROUND else best_z)
 
 
 def _support_relation(a: Body, c: Contact, b: Body | None, tol: float) -> str:
@@ -501,8 +511,13 @@ def _confidence(gap: np.ndarray, alignment: float, tol: float) -> float:
 
 
 def supporters_of(a: Body, contacts: ObjectContacts, ancestors: dict[str, set[str]], bodies: dict[str, Body],
-                  params: GeometricParams, planes=()) -> tuple[list[SupportEdge], dict]:
+                  params: GeometricParams, planes=(), ground_height: float = 0.0) -> tuple[list[SupportEdge], dict]:
     """The support edges into one object (supporters from below, leaning on objects or on ``planes``, fallback).
+
+    An object that touches nothing falls back on the first upward surface below it; when, lowered onto it, it
+    would tip and turn at least ``lean_fall_deg`` (a book or a plank standing far off any resting pose, moved
+    away from what holds it by a depth error), it also leans on what it tips onto
+    (:func:`phiscene.topology.leaning.floating_tipping`, :func:`phiscene.topology.leaning.tipping_partner`).
 
     Returns
     -------
@@ -533,10 +548,15 @@ def supporters_of(a: Body, contacts: ObjectContacts, ancestors: dict[str, set[st
             parent = max(sorted(covers), key=lambda k: covers[k])
             why = "no contact within tolerance: the object whose upward surface A passes through"
         else:
-            parent = _object_below(a, bodies, contacts.tol[GROUND])
+            parent, height = _object_below(a, bodies, contacts.tol[GROUND], ground_height)
             why = "no contact within tolerance: the first upward surface straight below"
         edges.append(SupportEdge(parent, a.id, "supports", params.fallback_confidence, why))
         info.update(stable=False, fallback=True)
+        if not covers:
+            tip, lower = floating_tipping(a, height, params.lean_band, a.spacing)
+            if tip.leans(margin, params.lean_fall_deg):
+                edges += _tip_partner(a, tip, [parent], ancestors, bodies, params, planes, lower, info,
+                                      f"lowered {100 * lower:.0f} cm onto {parent}, ")
         return edges, info
 
     idx = np.concatenate([c.index for c in kept.values()])
@@ -568,16 +588,25 @@ def supporters_of(a: Body, contacts: ObjectContacts, ancestors: dict[str, set[st
                                  f"{100 * dist:.1f} cm outside the support below"))
     edges += wall_leaning(a, planes, direction, support_z, tols[GROUND], dist, params)
     if leans and not any(e.relation == "leans_on" for e in edges):
-        names = [k for k in bodies if k != a.id and k not in kept and a.id not in ancestors.get(k, ())]
-        found = tipping_partner(a, tip, bodies, names, planes, params.lean_step_deg, params.lean_hit,
-                                tip.pivot[2] + params.lean_band)
-        if found is not None:
-            name, angle = found
-            edges.append(SupportEdge(name, a.id, "leans_on", 0.5 * (1.0 - angle / tip.fall),
-                                     f"tips {angle:.0f} deg about its resting edge onto {name} "
-                                     f"(it would turn {tip.fall:.0f} deg to lie down)"))
-            info["tips_onto"] = name
+        edges += _tip_partner(a, tip, list(kept), ancestors, bodies, params, planes, 0.0, info, "")
     return edges, info
+
+
+def _tip_partner(a: Body, tip, supporters: list[str], ancestors: dict[str, set[str]], bodies: dict[str, Body],
+                 params: GeometricParams, planes, lower: float, info: dict, why: str) -> list[SupportEdge]:
+    """The ``leans_on`` edge to what ``a`` tips onto about the edge of ``tip`` (none when it lies down first),
+    after lowering it by ``lower`` (m); ``info["tips_onto"]`` names the partner. Its ``supporters`` and its
+    descendants are not candidates."""
+    names = [k for k in bodies if k != a.id and k not in supporters and a.id not in ancestors.get(k, ())]
+    found = tipping_partner(a, tip, bodies, names, planes, params.lean_step_deg, params.lean_hit,
+                            tip.pivot[2] - lower + params.lean_band, lower)
+    if found is None:
+        return []
+    name, angle = found
+    info["tips_onto"] = name
+    return [SupportEdge(name, a.id, "leans_on", 0.5 * (1.0 - angle / tip.fall),
+                        f"{why}tips {angle:.0f} deg about its resting edge onto {name} "
+                        f"(it would turn {tip.fall:.0f} deg to lie down)")]
 
 
 def wall_leaning(a: Body, planes, direction: np.ndarray, support_z: float, tol: float, dist: float,
@@ -688,7 +717,8 @@ def _supporters(scene, bodies: dict[str, Body], params: GeometricParams) -> tupl
     edges: list[SupportEdge] = []
     diagnostics = {}
     for o in scene.objects:
-        e, info = supporters_of(bodies[o.id], contacts[o.id], ancestors, bodies, params, scene.structure)
+        e, info = supporters_of(bodies[o.id], contacts[o.id], ancestors, bodies, params, scene.structure,
+                                scene.ground_height)
         edges += e
         diagnostics[o.id] = info
     edges, floor = floor_standing(edges, scene, {k: b.bounds for k, b in bodies.items()}, params.floor_reach)

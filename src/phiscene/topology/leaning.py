@@ -90,7 +90,7 @@ def rotate_about_edge(points: np.ndarray, pivot: np.ndarray, direction: np.ndarr
 
 
 def tipping_partner(a: Body, tip: Tipping, bodies: dict[str, Body], names, planes, step_deg: float, hit: float,
-                    above: float) -> tuple[str, float] | None:
+                    above: float, lower: float = 0.0) -> tuple[str, float] | None:
     """What ``a`` falls onto when it tips about its edge: the first object or wall its samples reach.
 
     A's samples higher than ``above`` (z, m) are turned about the tipping edge of ``tip`` in steps of
@@ -98,7 +98,8 @@ def tipping_partner(a: Body, tip: Tipping, bodies: dict[str, Body], names, plane
     (m) of a sample of a body in ``names``, or crosses a wall plane (:class:`phiscene.scene.Plane` with
     ``kind == "wall"``), names the partner (ties: walls first, then by name). Samples already that close to a
     body, or behind a wall, before turning do not count for it: resting against something is not falling onto
-    it.
+    it. With ``lower`` > 0, A (its samples and ``tip.pivot``) is first moved down by that much (m; an object
+    floating above its supporter, lowered onto it as grounding will); ``above`` is a height after lowering.
 
     Returns
     -------
@@ -106,18 +107,21 @@ def tipping_partner(a: Body, tip: Tipping, bodies: dict[str, Body], names, plane
     """
     from scipy.spatial import cKDTree
 
-    pts = a.points[a.points[:, 2] > above]
+    drop = np.array([0.0, 0.0, lower])
+    pivot = tip.pivot - drop
+    pts = a.points - drop
+    pts = pts[pts[:, 2] > above]
     if not len(pts) or tip.fall <= 0.0:
         return None
-    reach = float(np.max(np.linalg.norm(pts - tip.pivot, axis=1))) + hit
-    lo, hi = tip.pivot - reach, tip.pivot + reach
+    reach = float(np.max(np.linalg.norm(pts - pivot, axis=1))) + hit
+    lo, hi = pivot - reach, pivot + reach
     near = [n for n in sorted(names) if np.all(bodies[n].bounds[0] <= hi) and np.all(bodies[n].bounds[1] >= lo)]
     trees = {n: cKDTree(bodies[n].points) for n in near}
     free = {n: ~np.isfinite(trees[n].query(pts, distance_upper_bound=hit)[0]) for n in near}
     walls = [p for p in planes if p.kind == "wall"]
     front = {p.id: p.signed_distance(pts) > 0.0 for p in walls}
     for angle in np.arange(step_deg, tip.fall, step_deg):
-        q = rotate_about_edge(pts, tip.pivot, tip.direction, math.radians(float(angle)))
+        q = rotate_about_edge(pts, pivot, tip.direction, math.radians(float(angle)))
         for wall in walls:
             if np.any(front[wall.id] & (wall.signed_distance(q) <= 0.0)):
                 return wall.id, float(angle)
@@ -126,6 +130,16 @@ def tipping_partner(a: Body, tip: Tipping, bodies: dict[str, Body], names, plane
             if m.any() and np.isfinite(trees[n].query(q[m], distance_upper_bound=hit)[0]).any():
                 return n, float(angle)
     return None
+
+
+def floating_tipping(a: Body, height: float, band: float, lever: float) -> tuple[Tipping, float]:
+    """How ``a``, which touches nothing, would rest lowered straight down onto a level surface at ``height``
+    (z, m): :func:`tipping` on its samples within ``band`` of its lowest one (the same in its own pose as
+    lowered), and how far it is lowered (m; negative when it would rise).
+    """
+    z = a.points[:, 2]
+    contact = Contact(np.arange(len(z)), z - height, np.tile([0.0, 0.0, 1.0], (len(z), 1)), np.full(len(z), height))
+    return tipping(a, [contact], band, lever), float(z.min() - height)
 
 
 def leaned_on(a: Body, supports: dict[str, Contact], band: float, lever: float, margin: float,
