@@ -44,7 +44,7 @@ def work(tmp_path_factory):
     meshes = {"table": trimesh.creation.box((0.8, 0.8, 0.1)), "box": trimesh.creation.box((0.1, 0.1, 0.1)),
               "block": trimesh.creation.box((0.2, 0.1, 0.05)), "plank": trimesh.creation.box((0.5, 0.05, 0.02)),
               "fruit": fruit, "slab": trimesh.creation.box((0.3, 0.3, 0.04)),
-              "column": trimesh.creation.box((0.1, 0.1, 0.3))}
+              "column": trimesh.creation.box((0.1, 0.1, 0.3)), "book": trimesh.creation.box((0.03, 0.15, 0.25))}
     return {"root": root, "cache": root / "cache",
             "meshes": {n: save_mesh(m, root / f"{n}.obj") for n, m in meshes.items()}}
 
@@ -148,6 +148,33 @@ def test_leaning_plank_keeps_both_supporters(work):
     cert = rec["objects"]["plank"]["certificate"]
     assert {"ground", "box"} <= set(cert["touching"]) and cert["supporters_kept"]
     assert cert["displacement"] < 0.03
+
+
+@pytest.mark.parametrize("lean", [True, False])
+def test_book_short_of_its_wall_is_moved_onto_it_not_turned(work, lean):
+    # a 25 cm book standing on the floor at 20 deg off vertical, its top towards the wall x = 0.5 and 5 cm short of
+    # it (a depth error). Leaning as put, it stands (statics: friction mu >= tan(20 deg) / 2 = 0.18 at the floor;
+    # the world has 0.8). Released where put, it turns about its bottom edge until its top reaches the wall, to
+    # asin((0.25 sin 20 deg + 0.05) / 0.25) = 32.8 deg off vertical, 12.8 deg more than the input (> max_turn, 10).
+    # Moved 5 cm onto the wall (remedy lean) it keeps the input's orientation.
+    from phiscene.scene import Plane
+
+    R = Rotation.from_euler("y", 20, degrees=True).as_matrix()
+    corners = np.array([[x, y, z] for x in (-0.015, 0.015) for y in (-0.075, 0.075) for z in (-0.125, 0.125)]) @ R.T
+    pose = make_pose(R, (0.5 - corners[:, 0].max() - 0.05, 0.0, -corners[:, 2].min() + 0.001))
+    scene = scene_of(work, {"book": ("book", pose)})
+    scene.structure.append(Plane("wall_0", "wall", (-1.0, 0.0, 0.0), 0.5))
+    g = graph_of(scene, [("ground", "book", "supports"), ("wall_0", "book", "leans_on")])
+    out, rec = run(work, scene, g, params={"faithful": {"enabled": True, "lean": lean}})
+    cert = rec["objects"]["book"]["certificate"]
+    assert "none: moved" in cert["reason"]  # released where put, it turned past max_turn
+    if not lean:  # no other start keeps it on the wall in the input's orientation
+        assert not (cert["supporters_kept"] and cert["rotation_change"] < 1.0)
+        return
+    assert cert["settled"] and {"ground", "wall_0"} <= set(cert["touching"])
+    assert cert["remedy"].startswith("lean") and cert["supporters_kept"]
+    assert cert["rotation_change"] < 1.0
+    assert rec["objects"]["book"]["lean_shift"][0] == pytest.approx(0.05, abs=0.005)  # the gap, towards the wall
 
 
 @pytest.mark.parametrize("max_shift", [0.09, 0.0])

@@ -27,6 +27,7 @@ from phiscene.assembly.penetration import PenetrationParams, SdfBody, resolve_pe
 from phiscene.assembly.settle import (
     SettleParams,
     clear_overlaps,
+    close_gaps,
     gives_way,
     holds_when_tilted,
     load_carriers,
@@ -657,6 +658,16 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
             pose[:3, 3] += shift
             rec["proxy_clear"] = [_round(v) for v in shift]
             best = attempt("clear", pose)
+    if not best["ok"] and fp.lean and info["leaning"]:
+        # short of what it leans on (depth error): lowered, then moved sideways until it touches it
+        lowered = _lowered(world, oid, pose, context, fp.contact_tol / 2)
+        world.set_pose(oid, lowered)
+        shift = close_gaps(world, oid, info["leaning"], fp.contact_tol, fp.contact_tol / 2, fp.onto_reach)
+        if shift is not None:
+            start = lowered.copy()
+            start[:3, 3] += shift
+            rec["lean_shift"] = [_round(v) for v in shift]
+            best = attempt(f"lean {np.linalg.norm(shift):.3f} m", start, origin=start)
     if not best["ok"]:
         starts = fa.resting_candidates(pose, info["normals"], info["com"], info["up"], fp.max_stable_angle)
         for start, angle in [c for c in starts if c[1] > 0.5][: fp.max_candidates]:

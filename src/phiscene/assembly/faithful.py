@@ -40,7 +40,8 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    ``extra_frames`` / ``damping``); where its convex pieces overlap what it
    neither stands nor leans on (its mesh clear of it), the corrected pose moved
    sideways out of that overlap (``clear``), which every later start is then
-   taken from; the object's other resting poses within
+   taken from; an object that leans, lowered and moved horizontally until it touches what it leans on
+   (``lean``: a depth error left it short of its wall); the object's other resting poses within
    ``max_stable_angle``, nearest first, at most ``max_candidates`` of them
    (``stable``); a run with high damping and rolling friction whose resting
    pose is then settled again at normal settings (``damped``); when none of
@@ -193,6 +194,12 @@ class FaithfulParams(Params):
         it, is knocked over by the simulator's separation before gravity acts. A start that overlaps and is
         accepted all the same is kept (a chair whose pieces reach into the table it stands at is nudged, not
         moved out). The move is recorded (``proxy_clear``).
+    lean
+        Remedy ``lean``: when the corrected pose of an object that leans (a ``leans_on`` parent) is rejected, move it,
+        lowered onto what lies beneath, horizontally until it touches each object or wall it leans on
+        (:func:`~phiscene.assembly.settle.close_gaps`, at most ``onto_reach``), and settle it from there: a depth
+        error left a book or a plank centimetres short of the wall it leans on, and released there it turns until
+        it falls onto it, far from the orientation the input gives it. The move is recorded (``lean_shift``).
     max_shift
         Remedy ``shifted``: an object whose every start went farther than this (m) or lost its supporters, or none
         of whose starts came to rest level (turned past ``max_turn`` or still moving), is restarted from the
@@ -279,6 +286,7 @@ class FaithfulParams(Params):
     retry_damping: float = 0.9
     retry_rolling_friction: float = 0.1
     clear: bool = True
+    lean: bool = True
     max_shift: float = 0.09
     shift_directions: int = 6
     onto_reach: float = 0.3

@@ -29,6 +29,7 @@ criterion.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -260,7 +261,7 @@ def holds_when_tilted(world: BulletWorld, name: str, tilt_deg: float, frames: in
 #: :func:`clear_overlaps`: an overlap whose normal is steeper than this (the horizontal part of the unit normal
 #: is smaller: within 60 deg of vertical) is left alone: the object rests on it, or lowering stops on it.
 CLEAR_MIN_HORIZONTAL = 0.5
-#: :func:`clear_overlaps`: horizontal moves tried before giving up.
+#: :func:`clear_overlaps`, :func:`close_gaps`: horizontal moves tried before giving up.
 CLEAR_ITERATIONS = 8
 
 
@@ -280,21 +281,72 @@ def clear_overlaps(world: BulletWorld, name: str, others: list[str], tol: float,
     The move (m, zero z), or ``None`` when nothing overlaps deeper than ``tol``, when clearing needs more than
     ``max_move`` (m), or when :data:`CLEAR_ITERATIONS` moves do not clear it (held on opposite sides).
     """
+
+    def push() -> np.ndarray | None:
+        # out of the deepest overlap (overlaps on one side would add up past the need)
+        for dist, normal in sorted(world.deepest_overlaps(name, others, tol).values(), key=lambda d: d[0]):
+            h, size = _horizontal(normal)
+            if size >= CLEAR_MIN_HORIZONTAL:
+                return h * (-dist / size)
+        return None
+
+    return _moved_horizontally(world, name, push, max_move)
+
+
+def close_gaps(world: BulletWorld, name: str, partners: list[str], tol: float, clearance: float,
+               max_move: float) -> np.ndarray | None:
+    """The horizontal move (3,) that brings body ``name`` within ``tol`` of each of ``partners``, if a short one does.
+
+    A depth error leaves a leaning object (a book against a wall, a plank against a box) centimetres short of what
+    holds it up; released there, it turns until it falls onto it, far from the orientation it has in the input.
+    Each step moves the body horizontally towards the nearest partner still farther than ``tol`` (m), along the
+    horizontal part of Bullet's closest-point normal, by what leaves ``clearance`` (m) along that normal; a
+    partner within 60 degrees of straight below or above (:data:`CLEAR_MIN_HORIZONTAL`) is not moved towards. The
+    body's pose is restored.
+
+    Returns
+    -------
+    The move (m, zero z), or ``None`` when every partner is already within ``tol``, when one is farther than
+    ``max_move`` (m) or not moved towards, or when :data:`CLEAR_ITERATIONS` moves do not close the gaps.
+    """
+
+    def pull() -> np.ndarray | None:
+        near = world.nearest(name, partners, max_move)
+        if len(near) < len(set(partners) & set(world.bodies)):
+            return np.full(3, np.inf)  # a partner out of reach
+        far = sorted((v for v in near.values() if v[0] > tol), key=lambda v: v[0])
+        if not far:
+            return None
+        dist, normal = far[0]
+        h, size = _horizontal(normal)
+        if size < CLEAR_MIN_HORIZONTAL:
+            return np.full(3, np.inf)  # below or above it: no horizontal move closes the gap
+        return -h * ((dist - clearance) / size)
+
+    return _moved_horizontally(world, name, pull, max_move)
+
+
+def _horizontal(normal: np.ndarray) -> tuple[np.ndarray, float]:
+    """The unit horizontal direction (3,) of ``normal`` (3,) and the length of its horizontal part."""
+    h = np.array([normal[0], normal[1], 0.0])
+    size = float(np.linalg.norm(h))
+    return (h / size if size > 0 else h), size
+
+
+def _moved_horizontally(world: BulletWorld, name: str, step: Callable[[], np.ndarray | None],
+                        max_move: float) -> np.ndarray | None:
+    """The sum of the moves ``step()`` asks for, body ``name`` moved by the sum so far before each call, until it
+    asks for none (``None``); ``None`` when the sum passes ``max_move`` (m; an infinite step: no move does it), when
+    the first call asks for none, or after :data:`CLEAR_ITERATIONS` moves. The body's pose is restored."""
     start = world.pose(name)
     shift = np.zeros(3)
     try:
         for _ in range(CLEAR_ITERATIONS):
-            push = np.zeros(3)  # out of the deepest overlap (overlaps on one side would add up past the need)
-            for dist, normal in sorted(world.deepest_overlaps(name, others, tol).values(), key=lambda d: d[0]):
-                h = np.array([normal[0], normal[1], 0.0])
-                size = float(np.linalg.norm(h))
-                if size >= CLEAR_MIN_HORIZONTAL:
-                    push = h / size * (-dist / size)
-                    break
-            if not push.any():
+            move = step()
+            if move is None:
                 return shift if shift.any() else None
-            shift += push
-            if np.linalg.norm(shift) > max_move:
+            shift = shift + move
+            if not np.linalg.norm(shift) <= max_move:
                 return None
             moved = start.copy()
             moved[:3, 3] += shift

@@ -413,11 +413,19 @@ class BulletWorld:
         """
         return {o: float(c[8]) for o, c in self._nearest_points(name, others, max_distance).items()}
 
+    def nearest(self, name: str, others: list[str], max_distance: float) -> dict[str, tuple[float, np.ndarray]]:
+        """Per body of ``others`` within ``max_distance`` (m) of body ``name``: the smallest signed distance (m;
+        negative = overlap) and the unit normal (3,) there, pointing from the other body towards ``name``.
+
+        Bodies farther (or not in the world) are left out.
+        """
+        return {o: (float(c[8]), np.asarray(c[7], dtype=float))
+                for o, c in self._nearest_points(name, others, max_distance).items()}
+
     def deepest_overlaps(self, name: str, others: list[str], depth: float) -> dict[str, tuple[float, np.ndarray]]:
         """Where body ``name`` overlaps each of ``others`` deeper than ``depth`` (m): the deepest point's signed
         distance (negative) and its unit normal (3,) pointing from the other body towards ``name``.
 
         Bodies overlapping less (or not in the world) are left out.
         """
-        return {o: (float(c[8]), np.asarray(c[7], dtype=float))
-                for o, c in self._nearest_points(name, others, 0.0).items() if c[8] < -depth}
+        return {o: v for o, v in self.nearest(name, others, 0.0).items() if v[0] < -depth}
