@@ -411,7 +411,7 @@ class BulletWorld:
 
         Bodies farther than ``max_distance`` (or not in the world) are left out.
         """
-        return {o: float(c[8]) for o, c in self._nearest_points(name, others, max_distance).items()}
+        return {o: d for o, (d, _) in self.nearest(name, others, max_distance).items()}
 
     def nearest(self, name: str, others: list[str], max_distance: float) -> dict[str, tuple[float, np.ndarray]]:
         """Per body of ``others`` within ``max_distance`` (m) of body ``name``: the smallest signed distance (m;

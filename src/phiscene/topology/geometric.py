@@ -511,13 +511,15 @@ def _confidence(gap: np.ndarray, alignment: float, tol: float) -> float:
 
 
 def supporters_of(a: Body, contacts: ObjectContacts, ancestors: dict[str, set[str]], bodies: dict[str, Body],
-                  params: GeometricParams, planes=(), ground_height: float = 0.0) -> tuple[list[SupportEdge], dict]:
+                  params: GeometricParams, planes, ground_height: float) -> tuple[list[SupportEdge], dict]:
     """The support edges into one object (supporters from below, leaning on objects or on ``planes``, fallback).
 
     An object that touches nothing falls back on the first upward surface below it; when, lowered onto it, it
     would tip and turn at least ``lean_fall_deg`` (a book or a plank standing far off any resting pose, moved
     away from what holds it by a depth error), it also leans on what it tips onto
     (:func:`phiscene.topology.leaning.floating_tipping`, :func:`phiscene.topology.leaning.tipping_partner`).
+
+    ``planes`` are the scene's walls and ceiling (:class:`phiscene.scene.Plane`), ``ground_height`` the ground's z (m).
 
     Returns
     -------
