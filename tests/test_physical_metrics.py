@@ -288,3 +288,33 @@ def test_set_pose_answers_what_a_new_world_answers(tmp_path, monkeypatch, forget
         world.step_frames(15)
         new = world.pose("a")
     assert np.allclose(used, new, atol=1e-9) == forget
+
+
+@pytest.mark.parametrize("frozen", [True, False])
+def test_set_pose_keeps_a_frozen_body_static_for_the_broadphase(tmp_path, frozen):
+    """A body frozen by :meth:`~phiscene.sim.bullet.BulletWorld.set_static` and put back by ``set_pose`` stays out
+    of static-static pairs, as a body created static is (Bullet's filter: no contact points with the ground);
+    released again, it touches the ground. Re-registering it with the dynamic filter made every frozen object
+    that was put back collide with every other static body each step, which slowed grounding several-fold."""
+    from phiscene.inertia import rigid_props
+
+    sim = SimSettings()
+    mesh = box(0.1, 0.1, 0.1)
+    hulls = [np.asarray(mesh.vertices)]
+    pose = at(0.0, 0.0, 0.049)  # 1 mm into the ground
+    with BulletWorld(sim, tmp_path / "cache") as world:
+        world.add_ground(0.0)
+        world.add_body("static", hulls, at(1.0, 0.0, 0.049), None)
+        world.add_body("a", hulls, pose, rigid_props(mesh, hulls, sim.density))
+        if frozen:
+            world.set_static("a")
+        world.set_pose("a", pose)
+        world.step_frames(1)
+        reference = len(world.contacts("static"))  # a body created static: no pair with the ground
+        assert reference == 0
+        assert (len(world.contacts("a")) == 0) == frozen
+        if frozen:
+            world.set_dynamic("a")
+            world.set_pose("a", pose)
+            world.step_frames(1)
+            assert len(world.contacts("a", "ground")) > 0

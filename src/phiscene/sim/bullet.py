@@ -35,9 +35,9 @@ log = logging.getLogger(__name__)
 GROUND_HALF_THICKNESS = 0.5
 #: Half extent of the ground box in x and y (m).
 GROUND_HALF_EXTENT = 50.0
-#: pybullet's collision filter (group, mask) of a body created dynamic, and of one created static (mass 0):
-#: Bullet's DefaultFilter / AllFilter and StaticFilter / AllFilter but StaticFilter
-#: (:meth:`BulletWorld.forget_contacts`).
+#: pybullet's collision filter (group, mask) of a dynamic body, and of a static one (created with mass 0 or frozen
+#: by :meth:`BulletWorld.set_static`, which pybullet's mass change re-filters): Bullet's DefaultFilter / AllFilter
+#: and StaticFilter / AllFilter but StaticFilter (:meth:`BulletWorld.forget_contacts`). Static bodies never pair.
 FILTER_DYNAMIC = (1, -1)
 FILTER_STATIC = (2, -3)
 
@@ -288,10 +288,12 @@ class BulletWorld:
         point and may tip before the rest are found. Grounding's tests (settling, the tilt test, carriers under
         load) must answer what a new world answers. Re-registering the body's collision filter (the defaults
         pybullet gives a body created dynamic or static) takes it out of the broadphase and back, which destroys
-        its pairs and their manifolds.
+        its pairs and their manifolds. The filter is the one of the body's current state: a frozen body re-registered
+        as dynamic would pair with every static body at each step (contacts without effect, at a cost that grew
+        with every frozen object put back).
         """
         b = self.bodies[name]
-        group, mask = FILTER_DYNAMIC if b.props is not None else FILTER_STATIC
+        group, mask = FILTER_DYNAMIC if b.dynamic else FILTER_STATIC
         self.p.setCollisionFilterGroupMask(b.uid, -1, group, mask)
 
     def pose(self, name: str) -> np.ndarray:
