@@ -8,6 +8,9 @@
 Usage::
 
     python benchmarks/method_speed.py [--results results] [--objects 10] [--method phi_scene]
+
+It prints the machine's reference seconds first (``benchmarks/machine.py``): compare timings of different days
+only beside them.
 """
 
 from __future__ import annotations
@@ -60,6 +63,9 @@ def main() -> int:
     ap.add_argument("--method", default="phi_scene", help="a phi_scene-kind method of config.yaml")
     args = ap.parse_args()
     set_threads(1)
+    from machine import describe, reference_seconds  # benchmarks/machine.py, beside this script
+
+    print(describe(reference_seconds()), flush=True)
     cfg = yaml.safe_load((ROOT / "config/config.yaml").read_text())
     results = Path(args.results)
     cache = results / "cache"
