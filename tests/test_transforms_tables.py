@@ -139,6 +139,7 @@ def test_real_table_means_per_method_and_counts_ballasts_and_bases(tmp_path):
         p = tmp_path / f"{name}.log.json"
         objects = {f"o{k}": {"settled": s, "settle_remedy": "none"} for k, s in enumerate(settled)}
         objects["poster"] = {"settled": True, "settle_remedy": "attached"}  # not counted in the settled fraction
+        objects["chair"] = {"settled": True, "settle_remedy": "hidden"}  # kept static by grounding: nor this
         p.write_text(json.dumps({"summary": {"seconds": seconds}, "objects": objects}))
         return p
 

@@ -56,11 +56,13 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
     """phi-Scene grounding of one scene in its topology's order.
 
     ``camera_path`` is the photo's ``camera.json`` in the scene's frame, for the faithful variant's ``ray``
-    remedy (:func:`~phiscene.assembly.faithful.ray_corrected`); without one that remedy is skipped (logged).
+    remedy (:func:`~phiscene.assembly.faithful.ray_corrected`) and its ``hidden`` remedy (the share of each
+    object the camera sees in the input, :func:`~phiscene.render.visible_shares`); without one both are skipped
+    (``ray`` logged).
     """
     from phiscene import topology
     from phiscene.assembly.assemble import AssemblyParams, ground_scene
-    from phiscene.render import camera_eye, read_camera
+    from phiscene.render import camera_eye, read_camera, visible_shares
     from phiscene.topology.attached import attached_ids
 
     use_disk_cache(cache_dir)
@@ -70,11 +72,16 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
     fixed = dict(attached_ids(graph, holders=True))
     fixed.update({o.id: o.attached for o in scene.objects if o.attached is not None})
     params = AssemblyParams.from_dict(assembly)
-    eye = camera_eye(read_camera(camera_path)) if camera_path is not None else None
+    camera = read_camera(camera_path) if camera_path is not None else None
+    eye = camera_eye(camera) if camera is not None else None
     if eye is None and params.faithful.enabled and params.faithful.ray:
         log.warning("%s: faithful.ray needs the photo's camera (none given): closing gaps straight down", scene_path)
+    visible = None
+    if camera is not None and params.faithful.enabled and params.faithful.hidden_share > 0:
+        visible = visible_shares(scene, camera)
     settled, record = ground_scene(scene, graph.order, proxies, params, SimSettings.from_dict(sim), Path(cache_dir),
-                                   progress=progress or log.info, graph=graph, attached=fixed, eye=eye)
+                                   progress=progress or log.info, graph=graph, attached=fixed, eye=eye,
+                                   visible=visible)
     record["topology"] = str(topology_path)
     write_json(out_log, record)
     save_scene(settled, out_scene)

@@ -349,14 +349,51 @@ def instance_labels(scene: Scene, camera: dict) -> np.ndarray:
     cast.add_triangles(o3d.core.Tensor(np.array([[-50, -50, g], [50, -50, g], [50, 50, g], [-50, 50, g]],
                                                 dtype=np.float32)),
                        o3d.core.Tensor(np.array([[0, 1, 2], [0, 2, 3]], dtype=np.uint32)))
+    hit = cast.cast_rays(o3d.core.Tensor(pixel_rays(camera)))["geometry_ids"].numpy().astype(np.int64)
+    hit[hit == o3d.t.geometry.RaycastingScene.INVALID_ID] = len(lut) - 1
+    return np.asarray(lut, dtype=np.int32)[hit].reshape(H, W)
+
+
+def pixel_rays(camera: dict) -> np.ndarray:
+    """One ray per pixel centre of ``camera``, row by row: (H * W, 6) float32, origin then direction (world).
+
+    The ray of pixel ``(u, v)`` leaves the camera centre along ``((u - cx) / fx, (v - cy) / fy, 1)`` in the camera
+    frame (the inverse of :func:`project`), the layout open3d's ``RaycastingScene.cast_rays`` takes.
+    """
+    W, H = int(camera["width"]), int(camera["height"])
     c2w = np.linalg.inv(np.asarray(camera["world_to_camera"], dtype=float))
     u, v = np.meshgrid(np.arange(W, dtype=float), np.arange(H, dtype=float))
     d = np.stack([(u - camera["cx"]) / camera["fx"], (v - camera["cy"]) / camera["fy"], np.ones_like(u)], axis=-1)
     d = d.reshape(-1, 3) @ c2w[:3, :3].T
-    rays = np.hstack([np.broadcast_to(c2w[:3, 3], d.shape), d]).astype(np.float32)
-    hit = cast.cast_rays(o3d.core.Tensor(rays))["geometry_ids"].numpy().astype(np.int64)
-    hit[hit == o3d.t.geometry.RaycastingScene.INVALID_ID] = len(lut) - 1
-    return np.asarray(lut, dtype=np.int32)[hit].reshape(H, W)
+    return np.hstack([np.broadcast_to(c2w[:3, 3], d.shape), d]).astype(np.float32)
+
+
+def visible_shares(scene: Scene, camera: dict) -> dict[str, float]:
+    """Share of each object that ``camera`` sees: its pixels in :func:`instance_labels` over its pixels alone.
+
+    An object's pixels alone are those whose ray meets its world-frame mesh, whatever lies in front; the share
+    is 1 for an object nothing hides, 0 for one entirely hidden behind others (or the ground), and ``nan`` for
+    one outside the image.
+
+    Returns
+    -------
+    dict
+        Object id -> share in [0, 1] (or ``nan``).
+    """
+    from phiscene.o3d import open3d
+
+    o3d = open3d()
+    labels = instance_labels(scene, camera).ravel()
+    rays = o3d.core.Tensor(pixel_rays(camera))
+    shares = {}
+    for index, o in enumerate(scene.objects):
+        m = o.world_mesh()
+        alone = o3d.t.geometry.RaycastingScene()
+        alone.add_triangles(o3d.core.Tensor(np.asarray(m.vertices, dtype=np.float32)),
+                            o3d.core.Tensor(np.asarray(m.faces, dtype=np.uint32)))
+        total = int(np.isfinite(alone.cast_rays(rays)["t_hit"].numpy()).sum())
+        shares[o.id] = float(np.count_nonzero(labels == index) / total) if total else float("nan")
+    return shares
 
 
 def render_instance_mask(scene: Scene, camera: dict | str | Path) -> np.ndarray:

@@ -49,7 +49,9 @@ REAL_COLUMNS = {"pen_depth": "min", "float_dist": "min", "drift_trans": "min", "
 REAL_EXTRA = ["attached", "ballasted", "bases", "settled_frac", "seconds"]
 #: Footnote of tables whose drift leaves attached objects out.
 ATTACHED_NOTE = ("Objects attached to a wall, the ceiling or the ground (``attached``) are static: they are "
-                 "colliders for the others and are left out of the drift and floating averages. The displacement "
+                 "colliders for the others and are left out of the drift and floating averages and of the settled "
+                 "fraction. They include the objects grounding kept where the input put them (remedy ``hidden``: "
+                 "mostly unseen in the photo, their guessed shape held by no start). The displacement "
                  "and rotation averages count every object of the input (an attached object with the motion the "
                  "method gives it: none for phi_scene), so that every method is averaged over the same objects. "
                  "Objects with a declared centre of mass (``ballasted``: grounding's remedy ``ballast``, for an "
@@ -188,7 +190,8 @@ def _assembly_summary(path: str | Path | None) -> dict:
     if is_failure_record(data) or "summary" not in data:
         return {"settled_frac": nan, "seconds": nan}
     s = data["summary"]
-    free = [r for r in data.get("objects", {}).values() if r.get("settle_remedy") != "attached"]
+    # static by grounding: attached, or kept where it was put (remedy hidden); attached in the grounded scene
+    free = [r for r in data.get("objects", {}).values() if r.get("settle_remedy") not in ("attached", "hidden")]
     settled = sum(r.get("settled") is True for r in free)
     return {"settled_frac": settled / len(free) if free else nan, "seconds": float(s.get("seconds", nan))}
 

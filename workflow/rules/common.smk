@@ -185,16 +185,16 @@ def method_topology(wildcards):
 
 def phi_scene_inputs(wildcards):
     """A phi_scene-kind job's inputs: initial scene, its method's support graph, proxies, and the photo's camera
-    when the method closes gaps along camera rays (`faithful.ray`) and the suite has one."""
+    when the suite has one and the faithful method uses it (`faithful.ray`, `faithful.hidden_share`)."""
     base = f"results/scenes/{wildcards.suite}/{wildcards.scene}"
     inputs = {
         "scene": f"{base}/initial/scene.json",
         "topology": method_topology(wildcards),
         "proxies": f"results/proxies/{wildcards.suite}/{wildcards.scene}.npz",
     }
-    faithful = method_assembly(wildcards).get("faithful", {})
+    faithful = method_assembly(wildcards).get("faithful", {})  # config.yaml gives every key
     has_camera = wildcards.suite in benchmark_suites() or wildcards.suite in source_suites("rest3d")
-    if faithful.get("enabled") and faithful.get("ray") and has_camera:
+    if faithful.get("enabled") and (faithful.get("ray") or faithful.get("hidden_share", 0) > 0) and has_camera:
         inputs["camera"] = f"{base}/reference/camera.json"
     return inputs
 

@@ -119,7 +119,7 @@ def _round(v, digits: int = 9) -> float | None:
 def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], params: AssemblyParams,
                  sim: SimSettings, cache_dir: Path, progress: Callable[[str], None] | None = None,
                  graph=None, attached: dict[str, str] | None = None,
-                 eye: np.ndarray | None = None) -> tuple[Scene, dict]:
+                 eye: np.ndarray | None = None, visible: dict[str, float] | None = None) -> tuple[Scene, dict]:
     """Physically ground a scene by topology-ordered penetration resolution and settling.
 
     Parameters
@@ -148,6 +148,10 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     eye : (3,) float, optional
         The photo's camera centre in the scene's frame, for the faithful remedy ``ray``
         (:func:`~phiscene.assembly.faithful.ray_corrected`; skipped without it).
+    visible
+        Object id -> share of it the photo's camera sees in the input (:func:`phiscene.render.visible_shares`),
+        for the faithful remedy ``hidden`` (``FaithfulParams.hidden_share``; skipped without it): an object kept
+        by it is added to the attachments (to the ground) and listed in the summary under ``hidden``.
 
     Returns
     -------
@@ -221,6 +225,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                 t0 = time.perf_counter()
                 pose, info = _faithful_start(scene, oid, proxies.get(oid), graph, poses, world_meshes, surfaces,
                                              attached, fp, pp.seed, cache_dir, rec, eye)
+                info.update(visible=None if visible is None else visible.get(oid), input=initial)
                 rec["seconds"]["flush"] = time.perf_counter() - t0
 
             t0 = time.perf_counter()
@@ -239,6 +244,10 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                 pose = _settle_faithful(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params,
                                         fp, info, rec, masses.get(oid))
                 _kept(masses, bases, oid, rec, obj)
+                if rec["settle_remedy"] == "hidden":  # static where it was put from now on, as if attached
+                    attached[oid] = "ground"
+                    log.warning("%s: no start held it and %.0f %% of it is visible in the photo: kept where it "
+                                "was put, static", oid, 100 * rec["visible_share"])
             elif params.settle:
                 pose = _settle(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params, rec,
                                masses.get(oid))
@@ -287,6 +296,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         summary["remedies"] = {o: c["remedy"] for o, c in certs.items() if c["remedy"] != "none"}
         summary["joint_unstable"] = [o for o, c in certs.items() if c.get("joint_stable") is False]
         summary["gross"] = fa.gross_failures(certs, params.faithful)
+        summary["hidden"] = sorted(o for o, r in objects.items() if r.get("settle_remedy") == "hidden")
         for oid, what in summary["gross"].items():
             log.warning("%s ends far from its input: %s", oid, what)
             if progress is not None:
@@ -454,6 +464,8 @@ def _progress_line(index: int, n: int, oid: str, rec: dict) -> str:
         parts.append(f"sdf {rec['sdf_iterations']} it, loss {rec['sdf_final_loss']:.3g}, shift {shift:.4f} m;")
     if rec["settled"] is not None:
         state = "settled" if rec["settled"] else "NOT settled"
+        if rec["settle_remedy"] == "hidden":
+            state = f"{100 * rec['visible_share']:.0f} % visible, kept static"
         parts.append(f"{state} after {rec['settle_frames']} frames ({rec['settle_remedy']}),"
                      f" moved {rec['settle_translation']:.4f} m;")
     parts.append(f"{sum(rec['seconds'].values()):.2f} s")
@@ -754,6 +766,26 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
             if holds(t):
                 break
     best = ok[0] if ok else min(tried, key=rank)
+    share = info.get("visible")
+    if not ok and share is not None and share < fp.hidden_share:  # nan (outside the image): no
+        # mostly unseen, and its guessed shape held by no start: kept where it was put, on what lies beneath it,
+        # unless the fallback ends nearer to the input (the corrected pose may have been carried far, or fall far
+        # when lowered) or nothing is beneath it
+        mass(com)
+        kept = _lowered(world, oid, pose, context, fp.contact_tol / 2)
+        world.set_pose(oid, kept)
+        near = touching()
+        far = lambda p: fa.closeness(info["input"], p, info["com"], info["diag"], start=info["input"])  # noqa: E731
+        if near and far(kept) < far(best["result"].pose):
+            rec["touching"] = near
+            world.set_static(oid)
+            moved, turned = window_motion(pose, kept)
+            reason = "; ".join(f"{t['label']}: {t['why']}" for t in tried)
+            rec.update(settle_frames=sum(t["frames"] for t in tried), settled=True, settle_remedy="hidden",
+                       residual_translation=0.0, residual_rotation=0.0, settle_translation=_round(moved),
+                       settle_rotation=_round(turned), reason=f"{reason}; kept: {share:.0%} visible",
+                       attempts=len(tried), visible_share=_round(share))
+            return kept
     result = best["result"]
     if not best["ok"]:
         remedy = "closest"

@@ -260,6 +260,17 @@ class FaithfulParams(Params):
         error explains (the 90th percentile of real ones is 15.6 cm); the graph or the shape is wrong there.
     ray_min_pitch
         Rays flatter than this (deg below the horizon) move objects sideways more than down: no shift.
+    hidden_share
+        Remedy ``hidden``: an object that no start held (it would take the ``closest`` fallback) and of which the
+        photo's camera sees less than this share (:func:`phiscene.render.visible_shares` on the input scene: its
+        pixels in the scene over its pixels alone) is kept where it was put, lowered onto what lies beneath it,
+        static, like an object fixed in place (``attached`` to the ground in the grounded scene: left out of
+        drift averages, counted with the attached objects); not when nothing is beneath it or the fallback's
+        result is nearer to the input (:func:`closeness` from the input, a fall below it counted: the corrected
+        pose may have been carried far with its supporter, or be lowered far). Its reconstruction is mostly a
+        guess of what the photo does not show (a chair tucked under a table, seen by its backrest), and what
+        holds it is in that unseen part: its guessed shape topples from every start, and the fallback throws it
+        tens of centimetres. 0 = off; without the photo's camera, off.
     """
 
     _label = "faithful parameters"
@@ -299,6 +310,7 @@ class FaithfulParams(Params):
     ray_share: float = 0.5
     ray_max_shift: float = 0.15
     ray_min_pitch: float = 10.0
+    hidden_share: float = 0.5
 
     def check(self) -> None:
         """Reject negative bounds and ``retry_damping`` outside [0, 1) (``ValueError``)."""
@@ -318,6 +330,8 @@ class FaithfulParams(Params):
                              f"(got {self.ray_min_pitch})")
         if not 0.0 < self.ballast_height < 1.0:
             raise ValueError(f"faithful ballast_height must be in (0, 1), got {self.ballast_height}")
+        if not 0.0 <= self.hidden_share <= 1.0:
+            raise ValueError(f"faithful hidden_share must be in [0, 1], got {self.hidden_share}")
 
 
 def support_normal(mesh_world, parents_world: dict[str, object]) -> np.ndarray:

@@ -1,0 +1,91 @@
+"""Remedy ``hidden``: an object mostly unseen in the photo that no start holds is kept where it was put.
+
+Oracles: the pinhole projection (a horizontal plane through the optical axis projects to the image's middle row,
+so a panel whose top edge lies in it hides exactly the lower half of a cube centred on the axis) and the statics
+of a thin plank standing on its edge (a 4-degree tilt topples it from every start: no start is accepted).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+from scenes import box_meshes, convex_proxies
+
+from phiscene.assembly import AssemblyParams, ground_scene
+from phiscene.assembly.faithful import FaithfulParams
+from phiscene.render import look_at_camera, visible_shares
+from phiscene.scene import Scene, SceneObject
+from phiscene.sim.settings import SimSettings
+from phiscene.topology.graph import SupportEdge, SupportGraph
+from phiscene.transforms import make_pose, rotation_angle
+
+torch.set_num_threads(1)
+
+CUBE = 0.4  # m
+HEIGHT = 1.0  # m, of the cube's centre and of the camera: the optical axis is horizontal through the centre
+CAMERA = look_at_camera(np.array([0.0, -3.0, HEIGHT]), np.array([0.0, 0.0, HEIGHT]), 320, 240, 40.0, 0.05, 20.0)
+
+
+def test_visible_share_is_the_unhidden_part_of_the_silhouette(tmp_path):
+    meshes = box_meshes(tmp_path, {"cube": (CUBE, CUBE, CUBE), "panel": (2.0, 0.02, HEIGHT - 0.2),
+                                   "wall": (3.0, 0.02, 3.0)})
+    front = -CUBE / 2 - 0.011  # the panel's centre, just in front of the cube's front face
+    scene = Scene([
+        SceneObject("half", meshes["cube"], make_pose(translation=(0.0, 0.0, HEIGHT))),
+        # top edge at the axis' height: hides the cube's lower half exactly
+        SceneObject("panel", meshes["panel"], make_pose(translation=(0.0, front, HEIGHT - (HEIGHT - 0.2) / 2))),
+        SceneObject("wall", meshes["wall"], make_pose(translation=(0.0, 1.0, 1.5))),
+        SceneObject("behind", meshes["cube"], make_pose(translation=(0.0, 1.5, HEIGHT))),  # behind the wall
+    ])
+    shares = visible_shares(scene, CAMERA)
+    # the cube's silhouette is its front face, about 64 px tall: one pixel row is 1.6 % of it
+    assert shares["half"] == pytest.approx(0.5, abs=0.02)
+    assert shares["behind"] == 0.0
+    assert shares["panel"] == pytest.approx(1.0)
+
+
+def test_outside_the_image_the_share_is_undefined(tmp_path):
+    meshes = box_meshes(tmp_path, {"cube": (CUBE, CUBE, CUBE)})
+    scene = Scene([SceneObject("away", meshes["cube"], make_pose(translation=(0.0, -5.0, HEIGHT)))])  # behind
+    assert np.isnan(visible_shares(scene, CAMERA)["away"])
+
+
+PLANK = (0.01, 0.3, 1.0)  # m: on its 1 x 30 cm edge a 4-degree tilt topples it, even with its mass low (ballast)
+
+
+def ground_plank(tmp_path, visible: dict | None):
+    meshes = box_meshes(tmp_path, {"plank": PLANK})
+    # tilted 3 deg towards its thin side, resting on its lower bottom edge; not turned upright (no flush)
+    turn = trimesh.transformations.rotation_matrix(np.radians(3.0), (0.0, 1.0, 0.0))[:3, :3]
+    corners = trimesh.creation.box(PLANK).vertices @ turn.T
+    pose = make_pose(rotation=turn, translation=(0.0, 0.0, -corners[:, 2].min()))
+    scene = Scene([SceneObject("plank", meshes["plank"], pose, "plank")])
+    graph = SupportGraph(objects=["plank"], edges=[SupportEdge("ground", "plank", "supports")], order=["plank"])
+    params = AssemblyParams.from_dict({"faithful": {"enabled": True, "flush": False}})
+    out, rec = ground_scene(scene, ["plank"], convex_proxies(scene, tmp_path / "cache"), params, SimSettings(),
+                            tmp_path / "cache", graph=graph, visible=visible)
+    return pose, out, rec
+
+
+def test_a_mostly_hidden_object_that_no_start_holds_is_kept_where_it_was_put(tmp_path):
+    assert FaithfulParams().hidden_share == 0.5
+    start, out, rec = ground_plank(tmp_path, {"plank": 0.2})
+    obj, r = out.get("plank"), rec["objects"]["plank"]
+    assert r["settle_remedy"] == "hidden" and r["certificate"]["remedy"] == "hidden"
+    assert r["visible_share"] == pytest.approx(0.2) and "kept: 20% visible" in r["reason"]
+    assert obj.attached == "ground" and out.attached_ids == ["plank"]  # static, like an attached object
+    assert rec["summary"]["hidden"] == ["plank"] and "plank" in rec["summary"]["attached"]
+    pose = np.asarray(obj.pose)
+    assert np.linalg.norm(pose[:3, 3] - start[:3, 3]) < 0.004 and rotation_angle(pose[:3, :3], start[:3, :3]) < 1e-6
+    assert r["certificate"]["supporters_kept"]
+
+
+def test_a_visible_object_that_no_start_holds_takes_the_fallback(tmp_path):
+    for visible in ({"plank": 0.8}, None):  # seen, or no camera
+        _, out, rec = ground_plank(tmp_path, visible)
+        r = rec["objects"]["plank"]
+        assert r["settle_remedy"] == "closest" and "visible_share" not in r
+        assert out.get("plank").attached is None and rec["summary"]["hidden"] == []
+        assert "marginal: tips when tilted" in r["reason"]  # the uniform plank balances at best
