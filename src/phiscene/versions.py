@@ -8,7 +8,7 @@ bumping one here after a behaviour change reruns exactly the affected jobs
 BENCHMARK = 7
 PROXIES = 3
 TOPOLOGY = 11
-GROUND = 17
+GROUND = 18
 METRICS = 8
 TABLES = 6
 REPORT = 1

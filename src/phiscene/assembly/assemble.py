@@ -770,15 +770,18 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
     if not ok and share is not None and share < fp.hidden_share:  # nan (outside the image): no
         # mostly unseen, and its guessed shape held by no start: kept where it was put, on what lies beneath it,
         # unless the fallback ends nearer to the input (the corrected pose may have been carried far, or fall far
-        # when lowered) or nothing is beneath it
+        # when lowered), nothing is beneath it, or the placed objects it touches, released, do not stay (static,
+        # it would shove them: its convex pieces may reach into them)
         mass(com)
         kept = _lowered(world, oid, pose, context, fp.contact_tol / 2)
         world.set_pose(oid, kept)
         near = touching()
         far = lambda p: fa.closeness(info["input"], p, info["com"], info["diag"], start=info["input"])  # noqa: E731
-        if near and far(kept) < far(best["result"].pose):
+        world.set_static(oid)
+        carriers = load_carriers(world, oid, near, info["fixed"], fp.contact_tol, fp.load_depth)
+        if near and far(kept) < far(best["result"].pose) and not (
+                carriers and gives_way(world, oid, carriers, fp.load_frames, fp.joint_tol, fp.joint_tol_deg)):
             rec["touching"] = near
-            world.set_static(oid)
             moved, turned = window_motion(pose, kept)
             reason = "; ".join(f"{t['label']}: {t['why']}" for t in tried)
             rec.update(settle_frames=sum(t["frames"] for t in tried), settled=True, settle_remedy="hidden",
