@@ -55,16 +55,27 @@ def test_outside_the_image_the_share_is_undefined(tmp_path):
 PLANK = (0.01, 0.3, 1.0)  # m: on its 1 x 30 cm edge a 4-degree tilt topples it, even with its mass low (ballast)
 
 
-def ground_plank(tmp_path, visible: dict | None):
-    meshes = box_meshes(tmp_path, {"plank": PLANK})
-    # tilted 3 deg towards its thin side, resting on its lower bottom edge; not turned upright (no flush)
+def ground_plank(tmp_path, visible: dict | None, overlap: float | None = None):
+    """The plank alone, or placed after a 20 cm box on its far side that reaches ``overlap`` (m) into it."""
+    meshes = box_meshes(tmp_path, {"plank": PLANK, "box": (0.2, 0.2, 0.2)})
+    # tilted 3 deg towards its thin side (its top towards +x), resting on its lower bottom edge; not turned upright
     turn = trimesh.transformations.rotation_matrix(np.radians(3.0), (0.0, 1.0, 0.0))[:3, :3]
     corners = trimesh.creation.box(PLANK).vertices @ turn.T
     pose = make_pose(rotation=turn, translation=(0.0, 0.0, -corners[:, 2].min()))
-    scene = Scene([SceneObject("plank", meshes["plank"], pose, "plank")])
-    graph = SupportGraph(objects=["plank"], edges=[SupportEdge("ground", "plank", "supports")], order=["plank"])
-    params = AssemblyParams.from_dict({"faithful": {"enabled": True, "flush": False}})
-    out, rec = ground_scene(scene, ["plank"], convex_proxies(scene, tmp_path / "cache"), params, SimSettings(),
+    objects = [SceneObject("plank", meshes["plank"], pose, "plank")]
+    edges = [SupportEdge("ground", "plank", "supports")]
+    if overlap is not None:
+        left = corners[corners[:, 2] < 0.1, 0].min()  # the plank's side towards -x, near the floor
+        box = make_pose(translation=(left + overlap - 0.1, 0.0, 0.1))
+        objects.insert(0, SceneObject("box", meshes["box"], box, "box"))
+        edges.insert(0, SupportEdge("ground", "box", "supports"))
+    order = [o.id for o in objects]
+    scene = Scene(objects)
+    graph = SupportGraph(objects=order, edges=edges, order=order)
+    # with the box, neither the penetration stage nor the remedy clear: the overlap stays
+    params = AssemblyParams.from_dict({"penetration": overlap is None,
+                                       "faithful": {"enabled": True, "flush": False, "clear": overlap is None}})
+    out, rec = ground_scene(scene, order, convex_proxies(scene, tmp_path / "cache"), params, SimSettings(),
                             tmp_path / "cache", graph=graph, visible=visible)
     return pose, out, rec
 
@@ -89,3 +100,15 @@ def test_a_visible_object_that_no_start_holds_takes_the_fallback(tmp_path):
         assert r["settle_remedy"] == "closest" and "visible_share" not in r
         assert out.get("plank").attached is None and rec["summary"]["hidden"] == []
         assert "marginal: tips when tilted" in r["reason"]  # the uniform plank balances at best
+
+
+def test_a_hidden_object_is_not_kept_where_static_it_would_shove_what_it_touches(tmp_path):
+    # the box reaches 8 mm into the plank's foot: kept there, static, the plank would push the box away when the
+    # box is released (the load test), so it takes the fallback
+    _, out, rec = ground_plank(tmp_path, {"plank": 0.2}, overlap=0.008)
+    r = rec["objects"]["plank"]
+    assert r["settle_remedy"] == "closest" and out.get("plank").attached is None
+    assert rec["summary"]["hidden"] == []
+    # the same box just touching it (1 mm gap): kept
+    _, out, rec = ground_plank(tmp_path, {"plank": 0.2}, overlap=-0.001)
+    assert rec["objects"]["plank"]["settle_remedy"] == "hidden" and out.get("plank").attached == "ground"

@@ -265,12 +265,14 @@ class FaithfulParams(Params):
         photo's camera sees less than this share (:func:`phiscene.render.visible_shares` on the input scene: its
         pixels in the scene over its pixels alone) is kept where it was put, lowered onto what lies beneath it,
         static, like an object fixed in place (``attached`` to the ground in the grounded scene: left out of
-        drift averages, counted with the attached objects); not when nothing is beneath it or the fallback's
-        result is nearer to the input (:func:`closeness` from the input, a fall below it counted: the corrected
-        pose may have been carried far with its supporter, or be lowered far). Its reconstruction is mostly a
-        guess of what the photo does not show (a chair tucked under a table, seen by its backrest), and what
-        holds it is in that unseen part: its guessed shape topples from every start, and the fallback throws it
-        tens of centimetres. 0 = off; without the photo's camera, off.
+        drift averages, counted with the attached objects); not when nothing is beneath it, when the placed
+        objects it touches move when released with it static (:func:`~phiscene.assembly.settle.gives_way`: its
+        convex pieces would shove them), or when the fallback's result is nearer to the input
+        (:func:`closeness` from the input, a fall below it counted: the corrected pose may have been carried
+        far with its supporter, or be lowered far). Its reconstruction is mostly a guess of what the photo does
+        not show (a chair tucked under a table, seen by its backrest), and what holds it is in that unseen part:
+        its guessed shape topples from every start, and the fallback throws it tens of centimetres. 0 = off;
+        without the photo's camera, off.
     """
 
     _label = "faithful parameters"
