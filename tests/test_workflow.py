@@ -88,12 +88,13 @@ def _check_plugin_outputs(root):
             assert a.pose[:2, 3] == pytest.approx(b.pose[:2, 3])
 
 
-@pytest.mark.parametrize("ray", [False, True])
-def test_grounding_reads_the_camera_only_when_a_method_closes_gaps_along_its_rays(tmp_path, ray):
-    """`assembly.faithful.ray` makes the photo's camera an input of the grounding job; off, it is none (a suite
-    without a camera, 3D-FRONT's, grounds as before)."""
+@pytest.mark.parametrize("ray, hidden", [(False, 0.0), (True, 0.0), (False, 0.5)])
+def test_grounding_reads_the_camera_only_when_a_method_uses_it(tmp_path, ray, hidden):
+    """`assembly.faithful.ray` (gaps closed along camera rays) or `hidden_share` > 0 (objects mostly unseen in the
+    photo) makes the photo's camera an input of the grounding job; with both off, it is none (a suite without a
+    camera, 3D-FRONT's, grounds as before)."""
     cfg = tmp_path / "ray.yaml"
-    cfg.write_text(f"assembly:\n  faithful:\n    ray: {str(ray).lower()}\n")
+    cfg.write_text(f"assembly:\n  faithful:\n    ray: {str(ray).lower()}\n    hidden_share: {hidden}\n")
     target = "results/methods/phi_scene/contact/scene_000/scene.json"
     res = run(["-s", str(ROOT / "Snakefile"), "--directory", str(tmp_path), "-n", target, "--configfile", str(cfg)],
               ROOT)
@@ -101,4 +102,4 @@ def test_grounding_reads_the_camera_only_when_a_method_closes_gaps_along_its_ray
     out = res.stdout + res.stderr
     block = out[out.index("rule phi_scene:"):]
     inputs = block[:block.index("output:")]
-    assert ("results/scenes/contact/scene_000/reference/camera.json" in inputs) == ray
+    assert ("results/scenes/contact/scene_000/reference/camera.json" in inputs) == (ray or hidden > 0)

@@ -69,7 +69,9 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    of :mod:`phiscene.assembly.assemble` in that order are tilt-tested), closest to the corrected input
    (:func:`closeness`), is taken (``closest``), with the reasons in the certificate. The final pose is always
    the outcome of free settling at normal settings: the object is never frozen where the
-   simulator would not leave it.
+   simulator would not leave it. The one exception is an object mostly unseen in the photo (``hidden_share``):
+   instead of that fallback it is kept where it was put, static and attached to the ground (``hidden``), when
+   something is beneath it, what it touches stays when released and the fallback ends no nearer to the input.
 4. **Joint settling**. The sequentially grounded scene is released as a
    whole until every object is at rest (``joint_settle_frames``): a
    supporter is never tested under the load put on it later in the order.
