@@ -76,7 +76,7 @@ def ground_plank(tmp_path, visible: dict | None, overlap: float | None = None):
     params = AssemblyParams.from_dict({"penetration": overlap is None,
                                        "faithful": {"enabled": True, "flush": False, "clear": overlap is None}})
     out, rec = ground_scene(scene, order, convex_proxies(scene, tmp_path / "cache"), params, SimSettings(),
-                            tmp_path / "cache", graph=graph, visible=visible)
+                            tmp_path / "cache", graph=graph, visible=None if visible is None else lambda: visible)
     return pose, out, rec
 
 

@@ -7,6 +7,7 @@ writes its outputs atomically.
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Callable
 from pathlib import Path
@@ -76,9 +77,9 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
     eye = camera_eye(camera) if camera is not None else None
     if eye is None and params.faithful.enabled and params.faithful.ray:
         log.warning("%s: faithful.ray needs the photo's camera (none given): closing gaps straight down", scene_path)
-    visible = None
+    visible = None  # computed only if an object reaches the remedy hidden
     if camera is not None and params.faithful.enabled and params.faithful.hidden_share > 0:
-        visible = visible_shares(scene, camera)
+        visible = functools.partial(visible_shares, scene, camera)
     settled, record = ground_scene(scene, graph.order, proxies, params, SimSettings.from_dict(sim), Path(cache_dir),
                                    progress=progress or log.info, graph=graph, attached=fixed, eye=eye,
                                    visible=visible)

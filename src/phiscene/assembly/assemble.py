@@ -12,6 +12,7 @@ are not in the world.
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import math
 import time
@@ -119,7 +120,8 @@ def _round(v, digits: int = 9) -> float | None:
 def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], params: AssemblyParams,
                  sim: SimSettings, cache_dir: Path, progress: Callable[[str], None] | None = None,
                  graph=None, attached: dict[str, str] | None = None,
-                 eye: np.ndarray | None = None, visible: dict[str, float] | None = None) -> tuple[Scene, dict]:
+                 eye: np.ndarray | None = None,
+                 visible: Callable[[], dict[str, float]] | None = None) -> tuple[Scene, dict]:
     """Physically ground a scene by topology-ordered penetration resolution and settling.
 
     Parameters
@@ -149,9 +151,11 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         The photo's camera centre in the scene's frame, for the faithful remedy ``ray``
         (:func:`~phiscene.assembly.faithful.ray_corrected`; skipped without it).
     visible
-        Object id -> share of it the photo's camera sees in the input (:func:`phiscene.render.visible_shares`),
-        for the faithful remedy ``hidden`` (``FaithfulParams.hidden_share``; skipped without it): an object kept
-        by it is added to the attachments (to the ground) and listed in the summary under ``hidden``.
+        Returns object id -> share of it the photo's camera sees in the input
+        (:func:`phiscene.render.visible_shares`), for the faithful remedy ``hidden``
+        (``FaithfulParams.hidden_share``; skipped without it); called once, when the first object reaches that
+        remedy (most scenes never do). An object it keeps is added to the attachments (to the ground) and listed
+        in the summary under ``hidden``.
 
     Returns
     -------
@@ -174,6 +178,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
 
     t_start = time.perf_counter()
     order, appended = full_order(scene, order)
+    shares = functools.cache(visible) if visible is not None else None
     attached = dict(attached or {})
     order = [o for o in order if o in attached] + [o for o in order if o not in attached]
     if appended:
@@ -225,7 +230,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                 t0 = time.perf_counter()
                 pose, info = _faithful_start(scene, oid, proxies.get(oid), graph, poses, world_meshes, surfaces,
                                              attached, fp, pp.seed, cache_dir, rec, eye)
-                info.update(visible=None if visible is None else visible.get(oid), input=initial)
+                info.update(visible=None if shares is None else (lambda o=oid: shares().get(o)), input=initial)
                 rec["seconds"]["flush"] = time.perf_counter() - t0
 
             t0 = time.perf_counter()
@@ -766,8 +771,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
             if holds(t):
                 break
     best = ok[0] if ok else min(tried, key=rank)
-    share = info.get("visible")
-    if not ok and share is not None and share < fp.hidden_share:  # nan (outside the image): no
+    share = info["visible"]() if not ok and info.get("visible") is not None else None
+    if share is not None and share < fp.hidden_share:  # nan (outside the image): no
         # mostly unseen, and its guessed shape held by no start: kept where it was put, on what lies beneath it,
         # unless the fallback ends nearer to the input (the corrected pose may have been carried far, or fall far
         # when lowered), nothing is beneath it, or the placed objects it touches, released, do not stay (static,
