@@ -6,7 +6,7 @@ bumping one here after a behaviour change reruns exactly the affected jobs
 """
 
 BENCHMARK = 7
-PROXIES = 3
+PROXIES = 4
 TOPOLOGY = 11
 GROUND = 18
 METRICS = 8
