@@ -3,6 +3,7 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import trimesh
@@ -47,8 +48,10 @@ def test_bad_input_is_one_line(tmp_path):
     (tmp_path / "in/scene.json").write_text('{"format": "phiscene.scene/1", "objects": [{"id": "a"}]}')
     res = phiscene("ground", str(tmp_path / "in"), str(tmp_path / "out"), cwd=tmp_path)
     assert res.returncode == 1
-    assert res.stderr.strip().count("\n") == 0, res.stderr
-    assert "scene.json" in res.stderr and "objects[0]" in res.stderr
+    # one line, after the note on the config taken (none in the working folder: the one shipped with phiscene)
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 2 and "default config shipped with phiscene" in lines[0], res.stderr
+    assert "scene.json" in lines[1] and "objects[0]" in lines[1]
     assert not (tmp_path / "out/scene.json").exists()
 
 
@@ -79,6 +82,29 @@ def test_ground_command_uses_the_method_settings(tmp_path):
                    "--method", "initial", cwd=tmp_path)
     assert bad.returncode == 1 and bad.stderr.strip().count("\n") == 0, bad.stderr
     assert "'initial'" in bad.stderr and "phi_scene_paper" in bad.stderr
+
+
+def test_ground_command_without_a_config_grounds_as_the_workflows_phi_scene(tmp_path):
+    """Run where there is no config/config.yaml, `phiscene ground` reads the workflow's own config as shipped with
+    the package (the faithful `phi_scene` method, not the paper's loop of the parameter defaults), says so, and
+    keeps its cache beside its outputs, not in the workflow's results/cache of the working folder."""
+    import yaml
+
+    from phiscene.config import method_assembly, packaged_config_path
+
+    repo = yaml.safe_load((Path(__file__).resolve().parents[1] / "config/config.yaml").read_text())
+    assert yaml.safe_load(packaged_config_path().read_text()) == repo
+    cube = save_mesh(trimesh.creation.box([0.1, 0.1, 0.1]), tmp_path / "meshes/cube.glb")
+    save_scene(Scene([SceneObject("cube", cube, make_pose(translation=[0, 0, 0.08]))]), tmp_path / "in/scene.json")
+    res = phiscene("ground", str(tmp_path / "in"), str(tmp_path / "out"), cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "default config shipped with phiscene" in res.stderr
+    log = json.loads((tmp_path / "out/assembly.json").read_text())
+    want = method_assembly(repo, "phi_scene")
+    assert log["params"]["faithful"]["enabled"] is want["faithful"]["enabled"] is True
+    assert log["params"]["penetration_params"]["optimizer"] == want["penetration_params"]["optimizer"]
+    np.testing.assert_allclose(load_scene(tmp_path / "out/scene.json").get("cube").pose[2, 3], 0.05, atol=1e-3)
+    assert (tmp_path / "out/cache").is_dir() and not (tmp_path / "results").exists()
 
 
 def test_ground_command_takes_a_suites_proxy_settings(tmp_path):

@@ -10,8 +10,9 @@
     phiscene import-front3d ROOT OUT_DIR [--room SCENE_ID ...] [--test-rooms 1000] [--initial PATTERN]
     phiscene export SCENE_JSON OUT_DIR [--proxies P.npz] [--topology T.json] [--no-check] [--demo]
 
-Settings come from a workflow config file (``--config``; default
-``config/config.yaml`` if present in the working directory, else built-in defaults).
+Settings come from a workflow config file (``--config``; default ``config/config.yaml`` if present in the
+working directory, else the workflow's default config as shipped with the package, :func:`phiscene.config.
+packaged_config_path`, so that ``phiscene ground`` run anywhere grounds as the workflow's ``phi_scene`` does).
 """
 
 from __future__ import annotations
@@ -31,14 +32,25 @@ def _config(path: str | None) -> dict:
     import yaml
 
     p = Path(path) if path else Path("config/config.yaml")
+    shipped = False
     if not p.is_file():
         if path:
             raise PhisceneError(f"{p}: config file not found")
-        return {}
+        from phiscene.config import packaged_config_path
+
+        p, shipped = packaged_config_path(), True
+        if not p.is_file():
+            raise PhisceneError(f"no config/config.yaml in {Path.cwd()} and none shipped with phiscene ({p}): "
+                                "pass --config FILE")
+        print(f"phiscene: no config/config.yaml in {Path.cwd()}; using the default config shipped with phiscene "
+              f"({p}; --config FILE for another)", file=sys.stderr)
     try:
-        return yaml.safe_load(p.read_text()) or {}
+        cfg = yaml.safe_load(p.read_text()) or {}
     except yaml.YAMLError as exc:
         raise PhisceneError(f"{p}: not valid YAML ({str(exc).splitlines()[0]})") from None
+    if shipped:
+        cfg.pop("cache_dir", None)  # the workflow's results/cache, relative to a repository: beside the outputs here
+    return cfg
 
 
 def _known_suite(cfg: dict, suite: str) -> None:

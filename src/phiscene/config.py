@@ -40,7 +40,15 @@ from typing import Any
 from phiscene.params import nested_params
 
 __all__ = ["METHOD_PARAMS", "SECTIONS", "SOURCE_PARAMS", "ConfigError", "bench_settings", "check_config",
-           "check_params", "deep_merge", "load_class", "method_assembly", "method_params", "schema_sections"]
+           "check_params", "deep_merge", "load_class", "method_assembly", "method_params", "packaged_config_path",
+           "schema_sections"]
+
+def packaged_config_path() -> Path:
+    """The workflow's ``config/config.yaml`` as shipped with the package (``phiscene/defaults/config.yaml``, a link
+    to it in the repository, the file itself in a built wheel): what the ``phiscene`` command reads where the
+    working folder has no ``config/config.yaml``."""
+    return Path(__file__).resolve().parent / "defaults" / "config.yaml"
+
 
 #: Config path -> parameter class of the fixed sections.
 SECTIONS: dict[str, str] = {
