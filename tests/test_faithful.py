@@ -341,6 +341,33 @@ def test_resting_candidates_are_every_facet_within_the_angle_nearest_first():
     assert len(resting_candidates(pose, normals, np.zeros(3), up, 45.0)) == 1
 
 
+def test_resting_facets_are_those_the_centre_of_mass_projects_into():
+    # a prism over the obtuse triangle A (0, 0), B (1, 0), C (0.9, 0.1), 0.5 long along z: the centroid
+    # (0.633, 0.033) projects inside AB and AC but beyond B on BC, so it rests on AB, AC and both ends, never on BC
+    tri = np.array([[0.0, 0.0], [1.0, 0.0], [0.9, 0.1]])
+    points = np.vstack([np.c_[tri, np.zeros(3)], np.c_[tri, np.full(3, 0.5)]])
+    normals = {tuple(np.round(n, 6)) for n in resting_normals(points)}
+    ac = np.array([-0.1, 0.9, 0.0]) / np.hypot(0.1, 0.9)  # outward normals (away from the third corner)
+    bc = np.array([0.1, 0.1, 0.0]) / np.hypot(0.1, 0.1)
+    want = {tuple(np.round(n, 6)) for n in ([0.0, -1.0, 0.0], ac, [0.0, 0.0, 1.0], [0.0, 0.0, -1.0])}
+    assert normals == want and tuple(np.round(bc, 6)) not in normals
+    # a declared centre of mass moved near C makes BC a resting face too (its projection is now inside BC)
+    with_c = {tuple(np.round(n, 6)) for n in resting_normals(points, np.array([0.93, 0.05, 0.25]))}
+    assert tuple(np.round(bc, 6)) in with_c
+
+
+def test_resting_facets_match_trimesh_stable_poses():
+    # the reference: trimesh's stable poses (threshold 0: every pose it can rest in) of a random hull, which
+    # resting_normals finds without its toppling graph
+    rng = np.random.default_rng(3)
+    points = rng.normal(size=(60, 3)) * [0.3, 0.2, 0.1]
+    hull = trimesh.convex.convex_hull(points)
+    transforms, _ = trimesh.poses.compute_stable_poses(hull, n_samples=1, threshold=0.0)
+    ref = {tuple(np.around(T[:3, :3].T @ [0.0, 0.0, -1.0], 3)) for T in transforms}
+    assert len(ref) >= 3
+    assert {tuple(np.around(n, 3)) for n in resting_normals(points)} == ref
+
+
 def test_carried_follows_the_supporter_point_beneath_without_turning():
     # the supporter turns 90 deg about z around its centre (0, 0, 0.5) and moves 0.1 m along x;
     # the object's centre of mass sits 0.2 m along x from that centre

@@ -519,16 +519,21 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
             "points": points, "below_world": parents_world}
 
 
+#: Part of the key of the cached resting normals: changed when :func:`~phiscene.assembly.faithful.resting_normals`
+#: answers differently for the same hull.
+RESTING_VERSION = b"v2"
+
+
 def _resting_normals(hull_points: np.ndarray, cache_dir: Path, com: np.ndarray | None = None) -> np.ndarray:
     """:func:`~phiscene.assembly.faithful.resting_normals` of a hull (k, 3) with centre of mass ``com`` (3,)
-    (default the uniform solid's), cached in ``cache_dir/resting`` by the hull's vertices and ``com``
-    (enumerating the resting poses of a 500-vertex hull takes about 0.4 s)."""
+    (default the uniform solid's), cached in ``cache_dir/resting`` by the hull's vertices, ``com`` and
+    :data:`RESTING_VERSION`."""
     import hashlib
 
     from phiscene.atomic import atomic_path
 
     points = np.ascontiguousarray(hull_points, dtype=float)
-    extra = b"" if com is None else b"com" + np.ascontiguousarray(com, dtype=float).tobytes()
+    extra = (b"" if com is None else b"com" + np.ascontiguousarray(com, dtype=float).tobytes()) + RESTING_VERSION
     key = hashlib.sha256(points.tobytes() + str(points.shape).encode() + extra).hexdigest()[:20]
     path = Path(cache_dir) / "resting" / f"{key}.npy"
     if path.exists():

@@ -6,8 +6,8 @@ a fruit rolls off the table. The faithful variant adds these around the
 same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
 
 1. **Flush correction** before the SDF stage. The stable resting poses of the
-   object's convex hull (:func:`trimesh.poses.compute_stable_poses`) each rest
-   on one hull facet; the facet whose world normal under the input rotation is
+   object's convex hull (:func:`resting_normals`: the facets its centre of mass projects into, the stable poses
+   of :func:`trimesh.poses.compute_stable_poses`) each rest on one hull facet; the facet whose world normal under the input rotation is
    closest to ``-n`` (``n``: the supporters' surface normal under the object's
    footprint, :func:`support_normal`) is made to face exactly ``-n`` by the
    smallest rotation, about the object's centre of mass, if that rotation is at
@@ -391,6 +391,11 @@ def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return Rotation.from_rotvec(axis / s * math.atan2(s, c)).as_matrix()
 
 
+#: Faces of a hull with less area than this share of its squared diagonal are slivers that no body rests on
+#: (:func:`resting_normals`).
+RESTING_MIN_AREA = 1e-12
+
+
 def resting_normals(hull_points: np.ndarray, com: np.ndarray | None = None) -> np.ndarray:
     """Outward normals (k, 3), local frame, of the facets the object's convex hull can rest on.
 
@@ -405,9 +410,25 @@ def resting_normals(hull_points: np.ndarray, com: np.ndarray | None = None) -> n
 
     hull = trimesh.convex.convex_hull(np.asarray(hull_points, dtype=float))
     centre = hull.center_mass if com is None else np.asarray(com, dtype=float)
-    transforms, _ = trimesh.poses.compute_stable_poses(hull, center_mass=centre, n_samples=1, threshold=0.0)
-    # Each transform rests the hull on z = 0: its resting facet's normal maps to -z.
-    return np.array([T[:3, :3].T @ np.array([0.0, 0.0, -1.0]) for T in transforms]).reshape(-1, 3)
+    # A hull rests on a face exactly when the centre of mass projects into it (the sinks of the toppling graph of
+    # trimesh.poses.compute_stable_poses, which is what it returns with threshold 0). Found directly: that function
+    # walks a networkx graph over every face (43 s for a 12,000-face hull of a reconstructed bowl), and a
+    # degenerate face (a sliver of a clipped or decimated hull) gets a NaN landing probability that, toppled into
+    # a resting face, drops that face from its answer (the bowl's base).
+    n = np.asarray(hull.face_normals, dtype=float)
+    tri = np.asarray(hull.triangles, dtype=float)
+    proj = centre - np.einsum("ij,ij->i", n, centre - tri[:, 0])[:, None] * n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bary = trimesh.triangles.points_to_barycentric(tri, proj)
+    diag = float(np.linalg.norm(hull.extents))
+    ok = (np.asarray(hull.area_faces) > RESTING_MIN_AREA * diag**2) & np.all(np.isfinite(bary), axis=1)
+    rests = np.flatnonzero(ok & np.all(bary >= 0.0, axis=1))
+    # one normal per resting facet (coplanar faces the centre projects onto, at a shared edge: the same to 1e-3,
+    # as trimesh merges them)
+    facets: dict[tuple, np.ndarray] = {}
+    for f in rests:
+        facets.setdefault(tuple(np.around(n[f], 3)), n[f])
+    return np.array(list(facets.values()), dtype=float).reshape(-1, 3)
 
 
 def resting_candidates(pose: np.ndarray, normals_local: np.ndarray, com_local: np.ndarray, up: np.ndarray,
