@@ -7,8 +7,8 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
 
 1. **Flush correction** before the SDF stage. The stable resting poses of the
    object's convex hull (:func:`resting_normals`: the facets its centre of mass projects into, the stable poses
-   of :func:`trimesh.poses.compute_stable_poses`) each rest on one hull facet; the facet whose world normal under the input rotation is
-   closest to ``-n`` (``n``: the supporters' surface normal under the object's
+   of :func:`trimesh.poses.compute_stable_poses`) each rest on one hull facet; the facet whose world normal
+   under the input rotation is closest to ``-n`` (``n``: the supporters' surface normal under the object's
    footprint, :func:`support_normal`) is made to face exactly ``-n`` by the
    smallest rotation, about the object's centre of mass, if that rotation is at
    most ``max_flush_angle``. Small orientation errors are corrected, large
