@@ -167,7 +167,8 @@ def hull_excess(mesh: trimesh.Trimesh, samples: int = 1024, seed: int = 0) -> fl
     """
     hull = mesh.convex_hull
     pts, _ = trimesh.sample.sample_surface(hull, samples, seed=seed)
-    _, dist, _ = trimesh.proximity.closest_point(mesh, pts)
+    with np.errstate(divide="ignore", invalid="ignore"):  # quiet on degenerate faces (same result)
+        _, dist, _ = trimesh.proximity.closest_point(mesh, pts)
     diag = float(np.linalg.norm(mesh.extents))
     return float(np.percentile(dist, 95)) / diag if diag > 0 else 0.0
 

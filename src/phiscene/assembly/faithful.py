@@ -367,7 +367,8 @@ def support_normal(mesh_world, parents_world: dict[str, object]) -> np.ndarray:
     if "ground" in parents_world:
         acc += up * len(low)
     for m in objects.values():
-        _, dist, tri = trimesh.proximity.closest_point(m, low)
+        with np.errstate(divide="ignore", invalid="ignore"):  # quiet on degenerate faces (same result)
+            _, dist, tri = trimesh.proximity.closest_point(m, low)
         n = m.face_normals[tri]
         near = dist <= max(0.02, 2 * float(np.min(dist)))
         w = (n[:, 2] > 0.5) & near
