@@ -69,3 +69,23 @@ def clearance(a: trimesh.Trimesh, b: trimesh.Trimesh, n: int = 20000) -> float:
     pa = np.vstack([sample_surface(a, n, 1), a.vertices])
     pb = np.vstack([sample_surface(b, n, 2), b.vertices])
     return float(min(signed_distance(b, pa).min(), signed_distance(a, pb).min()))
+
+
+def open_dense(mesh: trimesh.Trimesh, faces: int = 30000) -> trimesh.Trimesh:
+    """``mesh`` subdivided to at least ``faces`` faces, with every 23rd face removed (not watertight): the size and
+    the holes of a reconstruction."""
+    m = mesh.copy()
+    while len(m.faces) < faces:
+        m = m.subdivide()
+    m.update_faces(np.arange(len(m.faces)) % 23 != 5)
+    m.remove_unreferenced_vertices()
+    return m
+
+
+def table_mesh() -> trimesh.Trimesh:
+    """A table: a 1.0 x 0.6 x 0.04 m top on four 0.7 m legs, overlapping boxes (no closed manifold, not convex)."""
+    T = trimesh.transformations.translation_matrix
+    parts = [trimesh.creation.box([1.0, 0.6, 0.04], transform=T([0, 0, 0.72]))]
+    parts += [trimesh.creation.box([0.05, 0.05, 0.7], transform=T([sx * 0.45, sy * 0.25, 0.35]))
+              for sx in (-1, 1) for sy in (-1, 1)]
+    return trimesh.util.concatenate(parts)

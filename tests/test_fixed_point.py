@@ -13,21 +13,12 @@ from pathlib import Path
 
 import numpy as np
 import trimesh
+from scenes import open_dense, table_mesh
 
 from phiscene.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 TILT_DEG = 12.0
-
-
-def open_dense(mesh: trimesh.Trimesh, faces: int = 8000) -> trimesh.Trimesh:
-    """``mesh`` subdivided to at least ``faces`` faces, every 23rd face removed (not watertight)."""
-    m = mesh.copy()
-    while len(m.faces) < faces:
-        m = m.subdivide()
-    m.update_faces(np.arange(len(m.faces)) % 23 != 5)
-    m.remove_unreferenced_vertices()
-    return m
 
 
 def phiscene(*args, cwd):
@@ -39,18 +30,14 @@ def phiscene(*args, cwd):
 
 def test_a_resting_tilted_reconstruction_is_returned_where_it_was_put(tmp_path):
     T = trimesh.transformations.translation_matrix
-    table = trimesh.util.concatenate(
-        [trimesh.creation.box([1.0, 0.6, 0.04], transform=T([0, 0, 0.72]))]
-        + [trimesh.creation.box([0.05, 0.05, 0.7], transform=T([sx * 0.45, sy * 0.25, 0.35]))
-           for sx in (-1, 1) for sy in (-1, 1)])
-    objects = {"table": table,
+    objects = {"table": table_mesh(),
                "box0": trimesh.creation.box([0.3, 0.24, 0.1], transform=T([0.1, 0.0, 0.79])),
                "box1": trimesh.creation.box([0.2, 0.16, 0.08], transform=T([0.1, 0.0, 0.88]))}
     to_files = (trimesh.transformations.rotation_matrix(np.radians(TILT_DEG), [1, 0, 0])
                 @ trimesh.transformations.rotation_matrix(-np.pi / 2, [1, 0, 0]))  # z-up -> y-up, then tilted
     (tmp_path / "in").mkdir()
     for name, mesh in objects.items():
-        open_dense(mesh).apply_transform(to_files).export(tmp_path / "in" / f"{name}.glb")
+        open_dense(mesh, 8000).apply_transform(to_files).export(tmp_path / "in" / f"{name}.glb")
     cfg = ROOT / "config" / "config.yaml"
     out = phiscene("import-placed", "in", "imported", cwd=tmp_path)
     assert f"levelled by {TILT_DEG:.2f} deg" in out.stdout

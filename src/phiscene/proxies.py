@@ -274,11 +274,9 @@ def clip_to_hull(vertices: np.ndarray, bound: trimesh.Trimesh, tol: float = 0.0)
         piece = trimesh.convex.convex_hull(vertices)
     except QhullError:
         return None
-    halfspaces = []
-    for m in (piece, bound):  # rows (n, -n . p): n . x - n . p <= 0 inside
-        n = np.asarray(m.face_normals, dtype=float)
-        halfspaces.append(np.column_stack([n, -np.einsum("ij,ij->i", n, m.triangles[:, 0])]))
-    hs = np.unique(np.round(np.vstack(halfspaces), 12), axis=0)
+    # rows (n, -d): n . x - d <= 0 inside
+    hs = np.unique(np.round(np.vstack([np.column_stack([n, -d]) for n, d in map(_face_planes, (piece, bound))]), 12),
+                   axis=0)
     # the Chebyshev centre: the point deepest inside every halfspace (its depth must be positive)
     norm = np.linalg.norm(hs[:, :3], axis=1)
     lp = linprog(np.r_[0.0, 0.0, 0.0, -1.0], A_ub=np.column_stack([hs[:, :3], norm]), b_ub=-hs[:, 3],
@@ -382,10 +380,15 @@ def _vhacd(mesh: trimesh.Trimesh, params: ProxyParams) -> list[np.ndarray]:
         return [np.asarray(g.vertices, dtype=float) for g in geoms]
 
 
+def _face_planes(hull: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
+    """Outward unit normals (f, 3) and offsets (f,) of a convex mesh's face planes: ``n . x = d`` on face f."""
+    normals = np.asarray(hull.face_normals, dtype=float)
+    return normals, np.einsum("ij,ij->i", normals, hull.triangles[:, 0])
+
+
 def _plane_distance(points: np.ndarray, hull: trimesh.Trimesh) -> np.ndarray:
     """Signed distance (n,) of points to a convex hull from its face planes: exact inside, a lower bound outside."""
-    normals = hull.face_normals
-    offsets = np.einsum("ij,ij->i", normals, hull.triangles[:, 0])
+    normals, offsets = _face_planes(hull)
     points = np.asarray(points, dtype=float)
     step = max(1, 2**22 // max(len(normals), 1))  # rows per block: at most 4M distances (32 MB) at a time
     return np.concatenate([(points[i:i + step] @ normals.T - offsets).max(axis=1)
