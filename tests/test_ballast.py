@@ -127,3 +127,43 @@ def test_the_declared_centre_of_mass_is_the_one_the_mjcf_export_gives_mujoco(vas
     # MuJoCo's own world centre of mass of the body is the declared centre carried to the world by the pose
     R, t, s = decompose(out.get("vase").pose)
     np.testing.assert_allclose(data.xipos[b], R @ (s * com) + t, atol=1e-6)
+
+
+#: The step: a prism (depth 0.2 m along y) whose profile in x-z has its bottom ``A`` (x in [-0.12, 0], z = 0), a
+#: bevel ``B`` 6 cm long rising 15 deg from A's edge, then a steep side up to a top (z = 0.3) overhanging towards
+#: +x. (Its size keeps the simulator's rolling friction, a 3 mm lever, small beside the statics tested.)
+BEVEL, BEVEL_DEG = 0.06, 15.0
+STEP_PROFILE = ((-0.12, 0.0), (0.0, 0.0),
+                (BEVEL * math.cos(math.radians(BEVEL_DEG)), BEVEL * math.sin(math.radians(BEVEL_DEG))),
+                (0.22, 0.3), (-0.12, 0.3))
+
+
+def step_body() -> trimesh.Trimesh:
+    return trimesh.convex.convex_hull(np.array([(x, y, z) for x, z in STEP_PROFILE for y in (-0.1, 0.1)]))
+
+
+def test_a_ballast_keeps_the_orientation_of_the_photo_not_the_nearest_resting_facet(tmp_path):
+    # statics of the uniform solid: its centre of mass is beyond A's edge (it cannot stand on A, the way it was
+    # put), and over the bevel B within 4 deg of B's far edge: B, 15 deg away, is its nearest resting facet, and
+    # it only balances there (the tilt test tips it). At rest in the photo on A, it is no uniform solid: with a
+    # ballast it must stand on A, as put, not on B
+    mesh = step_body()
+    c = mesh.center_mass
+    beta = math.radians(BEVEL_DEG)
+    along = c[0] * math.cos(beta) + c[2] * math.sin(beta)  # along B from A's edge
+    above = c[2] * math.cos(beta) - c[0] * math.sin(beta)  # above B's plane
+    assert c[0] > 0.0
+    assert 0.0 < math.degrees(math.atan2(BEVEL - along, above)) < 4.0
+    path = save_mesh(mesh, tmp_path / "step.obj")
+    pose = make_pose(translation=(0.0, 0.0, 0.001))
+    out, rec, proxies = ground_alone("step", path, pose, "a wooden step", tmp_path / "cache", {"ballast": True})
+    obj = out.get("step")
+    cert = rec["objects"]["step"]["certificate"]
+    assert cert["remedy"] == "ballast" and cert["settled"] and cert["supporters_kept"]
+    R, t, _ = decompose(obj.pose)
+    assert math.degrees(math.acos(min(1.0, R[2, 2]))) < 1.0  # on A, level: the photo's orientation
+    assert cert["rotation_change"] < 1.0 and cert["flush_angle"] < 1.0
+    assert np.linalg.norm(t[:2] - pose[:2, 3]) < 0.01
+    held, uniform = saved_and_released(out, tmp_path / "out" / "scene.json", proxies, "com", SIM)
+    assert held["drift_trans"] < 1e-3 and held["drift_rot"] < 0.5  # MuJoCo, with the declared centre
+    assert uniform["drift_rot"] > 10.0  # a uniform solid, it falls off A

@@ -376,8 +376,10 @@ def _faithful_start(scene: Scene, oid: str, proxy: Proxy | None, graph, poses: d
                                        eye, fp)
         rec["ray_shift"] = _round(shift)
     if fp.flush and info["flushable"]:
-        pose, info["flush_angle"] = fa.flush_pose(pose, info["normals"], info["com"], info["up"],
-                                                  fp.max_flush_angle)
+        turned, info["flush_angle"] = fa.flush_pose(pose, info["normals"], info["com"], info["up"],
+                                                    fp.max_flush_angle)
+        info["flush_rotation"] = decompose(turned)[0] @ decompose(pose)[0].T  # world frame, about the centre of mass
+        pose = turned
     rec["flush_angle"] = _round(info["flush_angle"])
     return pose, info
 
@@ -513,6 +515,7 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
     leaning_ids = [e.source for e in edges if e.relation == "leans_on"]
     return {"parents": parents, "below": below, "leaning": leaning_ids, "up": up, "normals": normals, "com": com,
             "flushable": flushable, "given_base": obj.base is not None, "flush_angle": 0.0,
+            "flush_rotation": np.eye(3),
             "diag": float(np.linalg.norm(mesh.extents) * scale),
             "placed": list(poses), "input": np.asarray(obj.pose, dtype=float),
             "walls": [q for q in scene.structure if q.kind == "wall"], "cache_dir": cache_dir,
@@ -628,6 +631,10 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         # in place: within the bounds, still leaning where it leans (the graph may name the wrong supporter
         # from below: an object that rests where it was put, on something else, is in place all the same)
         in_place = ok and not any(p in lost for p in info["leaning"])
+        # and the start where the input put it, however turned (one moved onto a surface or shifted rests in
+        # place away from it)
+        shifted = fa.com_world(origin, info["com"])[:2] - fa.com_world(pose, info["com"])[:2]
+        home = in_place and float(np.linalg.norm(shifted)) <= fa.slide_bound(info["diag"], fp)
         robust = True  # tested only where it decides: a settled result in place (the fallback: below)
         tested = result.settled and in_place and fp.tilt_test > 0 and not info["leaning"]  # leaning: friction
         if tested:
@@ -649,7 +656,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         out = {"label": label, "result": result, "frames": frames, "gross": gross, "turned": turned,
                "ok": stayed and result.settled and robust and not gave, "lost": bool(lost), "robust": robust,
                "loaded": not gave,
-               "stayed": stayed, "in_place": in_place, "travel": moved if not lost else math.inf,
+               "stayed": stayed, "in_place": in_place, "home": home, "travel": moved if not lost else math.inf,
                "cost": fa.closeness(pose, result.pose, info["com"], info["diag"], start=lowered) + fell,
                "why": "; ".join(w for w in whys if w), "touching": near, "com": body["com"], "base": body["base"],
                "tilt_tested": tested}
@@ -716,20 +723,24 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                 attempt(f"onto {onto[1]:.3f} m", onto[0], origin=onto[0])
         if fp.ballast and not any(t["ok"] for t in tried) and all(
                 t["turned"] > fp.max_turn or not t["result"].settled or not t["robust"] for t in tried):
-            # none came to rest level: at rest in the photo, so not a uniform solid (flowers outweighing a vase)
+            # none came to rest level: at rest in the photo, so not a uniform solid (flowers outweighing a vase);
+            # then it is the photo's orientation that rests: the flush turn (chosen for the uniform solid) undone
             points = info["points"]  # its convex pieces' vertices (local)
-            declared = fa.ballast_com(pose, own, points, fp.ballast_height)
-            start = pose
+            start = _unflushed(world, oid, pose, info, context, fp.contact_tol / 2)
+            declared = fa.ballast_com(start, own, points, fp.ballast_height)
+            angle = 0.0  # the flush turn of these starts, from the photo's orientation
             if declared is not None and fp.flush and info["flushable"]:
                 # flush on the facet it rests on with that centre of mass (a vase's base is no resting facet of
                 # the uniform solid), then the centre over that base
-                start, angle = fa.flush_pose(pose, _resting_normals(points, info["cache_dir"], declared), declared,
+                start, angle = fa.flush_pose(start, _resting_normals(points, info["cache_dir"], declared), declared,
                                              info["up"], fp.max_flush_angle)
                 if angle > 0:
                     declared = fa.ballast_com(start, own, points, fp.ballast_height)
             if declared is not None:
                 mass(declared)
-                if not attempt("ballast", start, origin=start)["ok"]:  # the flush is a correction, as for none
+                t = attempt("ballast", start, origin=start)
+                t["flush"] = angle
+                if not t["ok"]:  # the flush is a correction, as for none
                     mass(com)  # the other starts as it came; the ballast result may still be the closest
             if fp.base and info["flushable"] and not info["given_base"] and not any(t["ok"] for t in tried) \
                     and not _rests(tried, fa.slide_bound(info["diag"], fp), holds):
@@ -743,7 +754,9 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                                     fp.tilt_test)
                 if flat is not None:
                     mass(declared, flat[0])
-                    if not attempt(f"base {flat[1]:g}", start, origin=start)["ok"]:
+                    t = attempt(f"base {flat[1]:g}", start, origin=start)
+                    t["flush"] = angle
+                    if not t["ok"]:
                         mass(com)
             elif not any(t["ok"] for t in tried):
                 mass(com)  # the body as it came (a tilt test may have changed it)
@@ -759,23 +772,15 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                 if any(t["ok"] for t in done) or any(t["in_place"] and t["result"].settled for t in done):
                     break
     ok = [t for t in tried if t["ok"]]
-    # else: no gross failure (a table flipped upside down, a chair thrown across the room) if any start avoided
-    # one, even one still moving when the settling window closed; then a settled result, then one that stayed in
-    # place, then one on its supporters, then one that holds when tilted, then one its carriers hold, then the
-    # closest to the corrected input
-    def rank(t: dict) -> tuple:
-        return (t["gross"], not t["result"].settled, not t["in_place"], not t["stayed"], not t["robust"],
-                not t["loaded"], t["cost"])
-
     if not ok and fp.tilt_test > 0 and not info["leaning"]:
         # the fallback: tilt-test the settled results in rank order (only those in place were tested), up to
         # the first that holds; one that only balances would roll off at the first disturbance
-        for t in sorted(tried, key=rank)[:FALLBACK_TILTS]:
+        for t in sorted(tried, key=fa.fallback_rank)[:FALLBACK_TILTS]:
             if t["gross"] or not t["result"].settled or t["tilt_tested"]:
                 continue
             if holds(t):
                 break
-    best = ok[0] if ok else min(tried, key=rank)
+    best = ok[0] if ok else min(tried, key=fa.fallback_rank)
     share = info["visible"]() if not ok and info.get("visible") is not None else None
     if share is not None and share < fp.hidden_share:  # nan (outside the image): no
         # mostly unseen, and its guessed shape held by no start: kept where it was put, on what lies beneath it,
@@ -800,6 +805,9 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                        attempts=len(tried), visible_share=_round(share))
             return kept
     result = best["result"]
+    if "flush" in best:  # started from the photo's orientation: the flush of _faithful_start undone
+        info["flush_angle"] = best["flush"]
+        rec["flush_angle"] = _round(best["flush"])
     if not best["ok"]:
         remedy = "closest"
     else:
@@ -823,6 +831,23 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                settle_translation=_round(moved), settle_rotation=_round(turned), reason=reason,
                attempts=len(tried))
     return final
+
+
+def _unflushed(world, oid: str, pose: np.ndarray, info: dict, below: list[str], clearance: float) -> np.ndarray:
+    """``pose`` with the flush turn of :func:`_faithful_start` (``info["flush_rotation"]``) undone about the centre
+    of mass, raised out of ``below`` (and the ground) where the turn takes it into them, to ``clearance`` (m)."""
+    back = info["flush_rotation"].T
+    if np.allclose(back, np.eye(3)):
+        return pose
+    from scipy.spatial.transform import Rotation
+
+    out = turned_about(pose, Rotation.from_matrix(back).as_rotvec(), fa.com_world(pose, info["com"]))
+    stoppers = list(dict.fromkeys([*below, *(["ground"] if "ground" in world.bodies else [])]))
+    world.set_pose(oid, out)
+    gaps = world.distances(oid, stoppers, clearance)
+    if gaps and min(gaps.values()) < 0:
+        out[2, 3] += clearance / 2 - min(gaps.values())
+    return out
 
 
 def _rests(tried: list[dict], bound: float, holds: Callable[[dict], bool]) -> bool:

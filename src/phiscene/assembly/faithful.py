@@ -1125,6 +1125,22 @@ def lost_supporters(below: list[str], leaning: list[str], touching: list[str]) -
     return lost + [p for p in leaning if p not in touching]
 
 
+def fallback_rank(attempt: dict) -> tuple:
+    """Sort key of a settling attempt when none was accepted (smallest first).
+
+    No gross failure (a table flipped upside down, a chair thrown across the room) if any start avoided one,
+    even one still moving when the settling window closed; then a settled result; then one that stayed in place
+    from a start where the input put it, however turned (``home``: a start moved onto a surface, or shifted, that
+    stays where it was moved is no nearer to the input than one that turned or slid a little from it, so
+    closeness decides between those); then one on its supporters (``stayed``), one that holds when tilted
+    (``robust``), one its carriers hold (``loaded``); then the closest to the corrected input (``cost``, m).
+
+    ``attempt`` holds those keys and ``result`` (a settling result with ``settled``).
+    """
+    return (attempt["gross"], not attempt["result"].settled, not attempt["home"], not attempt["stayed"],
+            not attempt["robust"], not attempt["loaded"], attempt["cost"])
+
+
 def gross_failure(moved: float, turned_deg: float, fp: FaithfulParams) -> bool:
     """Whether a motion is a gross failure: turned past ``max_stable_angle`` (beyond any resting pose tried) or
     moved past ``onto_reach`` (farther than the ``onto`` remedy moves): a crate flipped upside down, a chair thrown
