@@ -577,7 +577,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
     always the outcome of free settling.
 
     The body has the declared centre of mass ``com`` (3,) local, if any. When no start came to rest level, one
-    more start from the corrected pose with its centre of mass declared lower (remedy ``ballast``,
+    more start from the photo's orientation (the corrected pose with the flush turn undone) with its centre of
+    mass declared lower (remedy ``ballast``,
     :func:`~phiscene.assembly.faithful.ballast_com`) comes before the shifted ones; accepted, ``rec`` gets
     ``ballast`` (``com``: the declared centre, local; ``lowered``: m), else the body is a uniform solid again.
     """

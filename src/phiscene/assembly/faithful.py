@@ -56,16 +56,18 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    corrected pose shifted horizontally in ``shift_directions`` directions by
    steps of the slide bound up to ``max_shift`` (``shifted``, nearest first;
    its slide is measured from the shifted start; the first that stays in place
-   on its supporters ends the search); before the shifted starts, when none came to rest level, the corrected
-   pose once more with the centre of mass declared low over its base and flush on the facet it then rests on
+   on its supporters ends the search); before the shifted starts, when none came to rest level, the photo's
+   orientation (the corrected pose with its flush turn undone) once more with the centre of mass declared low
+   over its base and flush on the facet it then rests on
    (``ballast``, :func:`ballast_com`: the object is at rest in the photo, so its mass is not that of a uniform
    solid); then, when not even that start rests level and no start came to rest where it was put however
    turned, the same start on its base completed flat (``base``, :func:`flat_base`: its bottom, a hidden side
    the reconstruction guessed round, cannot stand whatever its mass). When none is accepted, a result that is no
    gross failure (turned past ``max_stable_angle`` or moved
    past ``onto_reach``: a table flipped over, a chair thrown across the room) is preferred, even one still moving
-   when the settling window closed; among those, the settled result that stayed in place (on its supporters if
-   one did: the graph may name the wrong one), else one that holds when tilted (the first ``FALLBACK_TILTS``
+   when the settling window closed; among those, the settled result that stayed in place from a start where the
+   input put it (:func:`fallback_rank`), on its supporters if one did (the graph may name the wrong one), else
+   one that holds when tilted (the first ``FALLBACK_TILTS``
    of :mod:`phiscene.assembly.assemble` in that order are tilt-tested), closest to the corrected input
    (:func:`closeness`), is taken (``closest``), with the reasons in the certificate. The final pose is always
    the outcome of free settling at normal settings: the object is never frozen where the
@@ -223,7 +225,8 @@ class FaithfulParams(Params):
         Displacement (m) in joint settling past which an object is grounded again.
     ballast
         Remedy ``ballast``: an object that no start so far brought to rest level (each turned past ``max_turn``,
-        was still moving, or only balanced on an edge) is settled once more from the corrected pose with its
+        was still moving, or only balanced on an edge) is settled once more from the photo's orientation (the
+        corrected pose with its flush turn undone: the flush chose the uniform solid's facet) with its
         centre of mass declared low in its base: over the centroid of its base, inside its convex hull, at
         ``ballast_height`` of its height above its lowest point (:func:`ballast_com`), before any shifted start.
         An object at rest in the photo is at rest: a vase whose flowers, as a uniform solid, outweigh its water
