@@ -577,8 +577,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
     always the outcome of free settling.
 
     The body has the declared centre of mass ``com`` (3,) local, if any. When no start came to rest level, one
-    more start from the photo's orientation (the corrected pose with the flush turn undone) with its centre of
-    mass declared lower (remedy ``ballast``,
+    more start with its centre of mass declared lower (from the photo's orientation, the corrected pose with the
+    flush turn undone, when that turn exceeded ``max_turn``; remedy ``ballast``,
     :func:`~phiscene.assembly.faithful.ballast_com`) comes before the shifted ones; accepted, ``rec`` gets
     ``ballast`` (``com``: the declared centre, local; ``lowered``: m), else the body is a uniform solid again.
     """
@@ -724,12 +724,14 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                 attempt(f"onto {onto[1]:.3f} m", onto[0], origin=onto[0])
         if fp.ballast and not any(t["ok"] for t in tried) and all(
                 t["turned"] > fp.max_turn or not t["result"].settled or not t["robust"] for t in tried):
-            # none came to rest level: at rest in the photo, so not a uniform solid (flowers outweighing a vase);
-            # then it is the photo's orientation that rests: the flush turn (chosen for the uniform solid) undone
+            # none came to rest level: at rest in the photo, so not a uniform solid (flowers outweighing a vase).
+            # A flush within the turn bound corrects the input's rotation error; a larger one was chosen for the
+            # uniform solid and contradicts the photo, which shows the object at rest: that turn undone
             points = info["points"]  # its convex pieces' vertices (local)
-            start = _unflushed(world, oid, pose, info, context, fp.contact_tol / 2)
+            undone = info["flush_angle"] > fp.max_turn
+            start = _unflushed(world, oid, pose, info, context, fp.contact_tol / 2) if undone else pose
             declared = fa.ballast_com(start, own, points, fp.ballast_height)
-            angle = 0.0  # the flush turn of these starts, from the photo's orientation
+            angle = 0.0  # the flush turn of these starts (from the photo's orientation when undone)
             if declared is not None and fp.flush and info["flushable"]:
                 # flush on the facet it rests on with that centre of mass (a vase's base is no resting facet of
                 # the uniform solid), then the centre over that base
@@ -740,7 +742,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
             if declared is not None:
                 mass(declared)
                 t = attempt("ballast", start, origin=start)
-                t["flush"] = angle
+                if undone:
+                    t["flush"] = angle
                 if not t["ok"]:  # the flush is a correction, as for none
                     mass(com)  # the other starts as it came; the ballast result may still be the closest
             if fp.base and info["flushable"] and not info["given_base"] and not any(t["ok"] for t in tried) \
@@ -756,7 +759,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
                 if flat is not None:
                     mass(declared, flat[0])
                     t = attempt(f"base {flat[1]:g}", start, origin=start)
-                    t["flush"] = angle
+                    if undone:
+                        t["flush"] = angle
                     if not t["ok"]:
                         mass(com)
             elif not any(t["ok"] for t in tried):

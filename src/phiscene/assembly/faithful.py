@@ -56,9 +56,9 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    corrected pose shifted horizontally in ``shift_directions`` directions by
    steps of the slide bound up to ``max_shift`` (``shifted``, nearest first;
    its slide is measured from the shifted start; the first that stays in place
-   on its supporters ends the search); before the shifted starts, when none came to rest level, the photo's
-   orientation (the corrected pose with its flush turn undone) once more with the centre of mass declared low
-   over its base and flush on the facet it then rests on
+   on its supporters ends the search); before the shifted starts, when none came to rest level, the corrected
+   pose (with its flush turn undone when that turn exceeded ``max_turn``) once more with the centre of mass
+   declared low over its base and flush on the facet it then rests on
    (``ballast``, :func:`ballast_com`: the object is at rest in the photo, so its mass is not that of a uniform
    solid); then, when not even that start rests level and no start came to rest where it was put however
    turned, the same start on its base completed flat (``base``, :func:`flat_base`: its bottom, a hidden side
@@ -225,10 +225,11 @@ class FaithfulParams(Params):
         Displacement (m) in joint settling past which an object is grounded again.
     ballast
         Remedy ``ballast``: an object that no start so far brought to rest level (each turned past ``max_turn``,
-        was still moving, or only balanced on an edge) is settled once more from the photo's orientation (the
-        corrected pose with its flush turn undone: the flush chose the uniform solid's facet) with its
-        centre of mass declared low in its base: over the centroid of its base, inside its convex hull, at
-        ``ballast_height`` of its height above its lowest point (:func:`ballast_com`), before any shifted start.
+        was still moving, or only balanced on an edge) is settled once more from the corrected pose (with its
+        flush turn undone when that turn exceeded ``max_turn``: chosen for the uniform solid, it contradicts the
+        photo, which shows the object at rest as it is) with its centre of mass declared low in its base: over
+        the centroid of its base, inside its convex hull, at ``ballast_height`` of its height above its lowest
+        point (:func:`ballast_com`), before any shifted start.
         An object at rest in the photo is at rest: a vase whose flowers, as a uniform solid, outweigh its water
         and glass, a potted plant whose foliage outweighs its soil. Kept when accepted like any start; the
         declared centre goes into the grounded scene (:attr:`phiscene.scene.SceneObject.com`), where every
