@@ -22,6 +22,7 @@ from phiscene.config import (
     load_class,
     method_assembly,
     method_params,
+    scaling_settings,
     schema_sections,
 )
 from phiscene.params import Params, nested_params
@@ -273,3 +274,16 @@ def test_default_config_passes_schema_and_classes():
     jsonschema.Draft202012Validator.check_schema(SCHEMA)
     jsonschema.validate(CONFIG, SCHEMA)
     check_config(CONFIG, schema_sections(ROOT / "config/schema.yaml"))
+
+
+def test_the_scaling_benchmark_rule_hands_the_script_every_section_it_reads():
+    # benchmarks/scaling.py runs on a config file written from the rule's params: every config section the
+    # script reads must be there (it read `methods` for phi_scene's settings while the rule left it out, and
+    # `snakemake` (the whole workflow) failed at its last job), and phi_scene's settings must be the workflow's
+    import re
+
+    read = set(re.findall(r'cfg\["(\w+)"\]', (ROOT / "benchmarks/scaling.py").read_text()))
+    settings = scaling_settings(CONFIG)
+    assert read and read <= set(settings)
+    assert method_assembly(settings, "phi_scene") == method_assembly(CONFIG, "phi_scene")
+    assert "scaling_settings(config)" in (ROOT / "workflow/rules/report.smk").read_text()

@@ -118,6 +118,16 @@ def deep_merge(base: Mapping[str, Any] | None, override: Mapping[str, Any] | Non
     return out
 
 
+#: The config sections ``benchmarks/scaling.py`` reads (:func:`scaling_settings`).
+SCALING_SECTIONS = ("benchmark", "sim", "proxies", "topology", "assembly", "methods", "metrics")
+
+
+def scaling_settings(config: Mapping[str, Any]) -> dict:
+    """The config sections ``benchmarks/scaling.py`` reads: the params of the workflow's ``scaling_benchmark`` rule,
+    written to the config file it runs with (it times ``phi_scene`` as configured: :func:`method_assembly`)."""
+    return {k: config[k] for k in SCALING_SECTIONS}
+
+
 def method_assembly(config: Mapping[str, Any], method: str) -> dict:
     """The ``assembly`` settings of a ``phi_scene``-kind method: its override deep-merged over ``assembly``."""
     return deep_merge(config.get("assembly"), config["methods"][method].get("assembly"))

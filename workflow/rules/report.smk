@@ -220,7 +220,7 @@ rule scaling_benchmark:
     params:
         script=os.path.join(workflow.basedir, "benchmarks/scaling.py"),
         sizes=config["report"]["scaling"],
-        settings={k: config[k] for k in ("benchmark", "sim", "proxies", "topology", "assembly", "metrics")},
+        settings=phiscene.config.scaling_settings(config),
         version=V.REPORT,
     log:
         "results/logs/bench/scaling.log",
