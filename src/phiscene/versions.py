@@ -8,7 +8,7 @@ bumping one here after a behaviour change reruns exactly the affected jobs
 BENCHMARK = 8
 PROXIES = 4
 TOPOLOGY = 11
-GROUND = 21
+GROUND = 22
 METRICS = 8
 TABLES = 6
 REPORT = 1

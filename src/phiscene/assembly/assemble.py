@@ -632,10 +632,6 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         # in place: within the bounds, still leaning where it leans (the graph may name the wrong supporter
         # from below: an object that rests where it was put, on something else, is in place all the same)
         in_place = ok and not any(p in lost for p in info["leaning"])
-        # and the start where the input put it, however turned (one moved onto a surface or shifted rests in
-        # place away from it)
-        shifted = fa.com_world(origin, info["com"])[:2] - fa.com_world(pose, info["com"])[:2]
-        home = in_place and float(np.linalg.norm(shifted)) <= fa.slide_bound(info["diag"], fp)
         robust = True  # tested only where it decides: a settled result in place (the fallback: below)
         tested = result.settled and in_place and fp.tilt_test > 0 and not info["leaning"]  # leaning: friction
         if tested:
@@ -657,7 +653,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         out = {"label": label, "result": result, "frames": frames, "gross": gross, "turned": turned,
                "ok": stayed and result.settled and robust and not gave, "lost": bool(lost), "robust": robust,
                "loaded": not gave,
-               "stayed": stayed, "in_place": in_place, "home": home, "travel": moved if not lost else math.inf,
+               "stayed": stayed, "in_place": in_place, "travel": moved if not lost else math.inf,
                "cost": fa.closeness(pose, result.pose, info["com"], info["diag"], start=lowered) + fell,
                "why": "; ".join(w for w in whys if w), "touching": near, "com": body["com"], "base": body["base"],
                "tilt_tested": tested}

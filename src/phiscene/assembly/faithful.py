@@ -65,9 +65,9 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    the reconstruction guessed round, cannot stand whatever its mass). When none is accepted, a result that is no
    gross failure (turned past ``max_stable_angle`` or moved
    past ``onto_reach``: a table flipped over, a chair thrown across the room) is preferred, even one still moving
-   when the settling window closed; among those, the settled result that stayed in place from a start where the
-   input put it (:func:`fallback_rank`), on its supporters if one did (the graph may name the wrong one), else
-   one that holds when tilted (the first ``FALLBACK_TILTS``
+   when the settling window closed; among those, the settled result that stayed in place (on its supporters if
+   one did: the graph may name the wrong one; :func:`fallback_rank`), else one that holds when tilted (the first
+   ``FALLBACK_TILTS``
    of :mod:`phiscene.assembly.assemble` in that order are tilt-tested), closest to the corrected input
    (:func:`closeness`), is taken (``closest``), with the reasons in the certificate. The final pose is always
    the outcome of free settling at normal settings: the object is never frozen where the
@@ -1134,14 +1134,12 @@ def fallback_rank(attempt: dict) -> tuple:
 
     No gross failure (a table flipped upside down, a chair thrown across the room) if any start avoided one,
     even one still moving when the settling window closed; then a settled result; then one that stayed in place
-    from a start where the input put it, however turned (``home``: a start moved onto a surface, or shifted, that
-    stays where it was moved is no nearer to the input than one that turned or slid a little from it, so
-    closeness decides between those); then one on its supporters (``stayed``), one that holds when tilted
+    (``in_place``, judged from its own start); then one on its supporters (``stayed``), one that holds when tilted
     (``robust``), one its carriers hold (``loaded``); then the closest to the corrected input (``cost``, m).
 
     ``attempt`` holds those keys and ``result`` (a settling result with ``settled``).
     """
-    return (attempt["gross"], not attempt["result"].settled, not attempt["home"], not attempt["stayed"],
+    return (attempt["gross"], not attempt["result"].settled, not attempt["in_place"], not attempt["stayed"],
             not attempt["robust"], not attempt["loaded"], attempt["cost"])
 
 
