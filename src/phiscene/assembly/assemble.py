@@ -837,15 +837,12 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
 def _unflushed(world, oid: str, pose: np.ndarray, info: dict, below: list[str], clearance: float) -> np.ndarray:
     """``pose`` with the flush turn of :func:`_faithful_start` (``info["flush_rotation"]``) undone about the centre
     of mass, raised out of ``below`` (and the ground) where the turn takes it into them, to ``clearance`` (m)."""
-    back = info["flush_rotation"].T
-    if np.allclose(back, np.eye(3)):
-        return pose
     from scipy.spatial.transform import Rotation
 
-    out = turned_about(pose, Rotation.from_matrix(back).as_rotvec(), fa.com_world(pose, info["com"]))
-    stoppers = list(dict.fromkeys([*below, *(["ground"] if "ground" in world.bodies else [])]))
+    back = Rotation.from_matrix(info["flush_rotation"].T).as_rotvec()
+    out = turned_about(pose, back, fa.com_world(pose, info["com"]))
     world.set_pose(oid, out)
-    gaps = world.distances(oid, stoppers, clearance)
+    gaps = world.distances(oid, _stoppers(world, below), clearance)
     if gaps and min(gaps.values()) < 0:
         out[2, 3] += clearance / 2 - min(gaps.values())
     return out
@@ -857,6 +854,11 @@ def _rests(tried: list[dict], bound: float, holds: Callable[[dict], bool]) -> bo
     return any(t["result"].settled and t["travel"] <= bound and holds(t) for t in tried)
 
 
+def _stoppers(world, below: list[str]) -> list[str]:
+    """What a body moved straight up or down meets: ``below``, and the ground whatever the graph says."""
+    return list(dict.fromkeys([*below, *(["ground"] if "ground" in world.bodies else [])]))
+
+
 def _lowered(world, oid: str, pose: np.ndarray, below: list[str], clearance: float) -> np.ndarray:
     """``pose`` moved straight down until within ``clearance`` of the nearest of ``below`` (or of the ground).
 
@@ -864,7 +866,7 @@ def _lowered(world, oid: str, pose: np.ndarray, below: list[str], clearance: flo
     always stops it: a supporter that is no longer beneath the object (it moved, or the graph was wrong) must not
     let it sink through the floor.
     """
-    stoppers = list(dict.fromkeys([*below, *(["ground"] if "ground" in world.bodies else [])]))
+    stoppers = _stoppers(world, below)
     out = pose.copy()
     for _ in range(8):
         world.set_pose(oid, out)
