@@ -13,6 +13,7 @@ import trimesh
 from phiscene.meshes import sample_surface, save_mesh
 from phiscene.proxies import ProxyParams, proxy_for_mesh, scene_proxies
 from phiscene.scene import Scene, SceneObject, load_scene, save_scene
+from phiscene.transforms import make_pose
 
 
 def ground_alone(oid: str, mesh_path: Path, pose: np.ndarray, description: str, cache: Path,
@@ -89,3 +90,12 @@ def table_mesh() -> trimesh.Trimesh:
     parts += [trimesh.creation.box([0.05, 0.05, 0.7], transform=T([sx * 0.45, sy * 0.25, 0.35]))
               for sx in (-1, 1) for sy in (-1, 1)]
     return trimesh.util.concatenate(parts)
+
+
+def leaning_pose(size, angle_deg: float) -> np.ndarray:
+    """A box whose long axis rises at ``angle_deg`` towards -x, lowest corner on z = 0, wall-side corner on x = 0."""
+    a = np.radians(angle_deg)
+    u = np.array([-np.cos(a), 0.0, np.sin(a)])
+    R = np.column_stack([u, [0.0, 1.0, 0.0], np.cross(u, [0.0, 1.0, 0.0])])
+    v = trimesh.creation.box(size).vertices @ R.T
+    return make_pose(R, (-v[:, 0].min(), 0.0, -v[:, 2].min()))

@@ -8,6 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import trimesh
+from scenes import leaning_pose
 
 from phiscene.bench import clutter
 from phiscene.bench.build import build_scene
@@ -28,15 +29,6 @@ from phiscene.transforms import make_pose
 SIM = SimSettings()
 WALL = Plane("wall_0", "wall", (1.0, 0.0, 0.0), 0.0)  # the plane x = 0, room at x > 0
 PLANK = (0.6, 0.08, 0.02)
-
-
-def leaning_pose(size, angle_deg: float) -> np.ndarray:
-    """A box whose long axis rises at ``angle_deg`` towards -x, lowest corner on z = 0, wall-side corner on x = 0."""
-    a = np.radians(angle_deg)
-    u = np.array([-np.cos(a), 0.0, np.sin(a)])
-    R = np.column_stack([u, [0.0, 1.0, 0.0], np.cross(u, [0.0, 1.0, 0.0])])
-    v = trimesh.creation.box(size).vertices @ R.T
-    return make_pose(R, (-v[:, 0].min(), 0.0, -v[:, 2].min()))
 
 
 @pytest.fixture(scope="module")

@@ -69,7 +69,7 @@ rule rest3d_scene:
         suite=alternation(source_suites("rest3d")),
     params:
         source=suite_source,
-        version=V.BENCHMARK,
+        version=V.IMPORT,
     log:
         "results/logs/benchmark/{suite}/{scene}.log",
     benchmark:

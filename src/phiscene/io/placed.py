@@ -12,6 +12,10 @@ stage downstream runs unchanged::
     OUT_DIR/reference/camera.json                                  when a camera is known
     OUT_DIR/import.json                                            source, up convention, the levelling applied
 
+Once levelled, the walls are estimated from the panels hanging on them (:func:`phiscene.walls.estimate_walls`:
+posters, paintings, windows) and written as the scene's ``structure``; ``import.json`` and the scene's ``meta``
+record their evidence and the groups given up.
+
 Placement file (``--placements``, optional): ``{"<id>": {"pos": [x, y, z], "quat": [w, x, y, z]}}`` or
 ``{"<id>": 4x4}``, in the source frame, applied to the mesh's vertices (the REST3D ``simulation.json`` layout
 is read by :mod:`phiscene.io.rest3d`).
@@ -35,6 +39,7 @@ from phiscene.levelling import LevelParams, UpEstimate, angle_deg, estimate_up, 
 from phiscene.params import Params
 from phiscene.scene import Scene, SceneObject, check_world_bounds, load_scene, save_scene
 from phiscene.transforms import Y_UP_TO_Z_UP, quat_wxyz_to_matrix, rigidity_error
+from phiscene.walls import WallParams, estimate_walls
 
 log = logging.getLogger(__name__)
 
@@ -65,6 +70,8 @@ class PlacedParams(Params):
         See :class:`phiscene.levelling.LevelParams`.
     image_width, image_height
         Size of the reference camera's image when the source gives only a field of view.
+    walls
+        The walls estimated from the panels hanging on them, once levelled (:class:`phiscene.walls.WallParams`).
     """
 
     _label = "import parameters"
@@ -75,6 +82,7 @@ class PlacedParams(Params):
     levelling: LevelParams = field(default_factory=LevelParams)
     image_width: int = 640
     image_height: int = 480
+    walls: WallParams = field(default_factory=WallParams)
 
     def check(self) -> None:
         """Reject an unknown up axis or image size (``ValueError``)."""
@@ -324,14 +332,19 @@ def import_placed(objects: list[PlacedObject], out_dir: str | Path, params: Plac
         camera_path = out_dir / "reference" / "camera.json"
         write_json(camera_path, cam)
     up_record = levelling.estimate.to_dict() if levelling.estimate is not None else None
+    walls = estimate_walls(Scene(scene_objects, ground_height=0.0), params.walls,
+                           None if camera is None else T[:3, :3] @ np.asarray(camera.eye, dtype=float) + T[:3, 3])
     meta = {"source": source or {}, "levelling": {"rotation_deg": levelling.rotation_deg,
-                                                  "transform": np.round(T, 12).tolist()}}
-    save_scene(Scene(scene_objects, ground_height=0.0, camera=camera_path, meta=meta), init_dir / "scene.json")
+                                                  "transform": np.round(T, 12).tolist()},
+            "walls": walls.record}
+    save_scene(Scene(scene_objects, ground_height=0.0, camera=camera_path, meta=meta, structure=walls.planes),
+               init_dir / "scene.json")
     write_json(out_dir / "import.json", {
         "format": IMPORT_FORMAT, "source": source or {}, "params": asdict(params),
         "transform": np.round(T, 12).tolist(), "levelling_rotation_deg": levelling.rotation_deg,
-        "up_estimate": up_record, "objects": {o.id: o.source.name for o in objects}})
-    log.info("%s: %d objects, levelled by %.2f deg", out_dir, len(objects), levelling.rotation_deg)
+        "up_estimate": up_record, "walls": walls.record, "objects": {o.id: o.source.name for o in objects}})
+    log.info("%s: %d objects, levelled by %.2f deg, %d walls estimated", out_dir, len(objects),
+             levelling.rotation_deg, len(walls.planes))
     return load_scene(init_dir / "scene.json")
 
 
