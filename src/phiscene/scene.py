@@ -106,12 +106,17 @@ class Plane:
         Unit normal pointing into the room (away from the solid side).
     offset
         Plane offset ``d``: points ``p`` on the plane satisfy ``normal . p + d = 0``; the room is where it is > 0.
+    estimated
+        Estimated from the objects hanging on it (:func:`phiscene.walls.estimate_walls`), not given: those
+        objects stay exactly where the input has them (the plane is where they are), they are not made flush
+        with it.
     """
 
     id: str
     kind: str
     normal: tuple[float, float, float]
     offset: float
+    estimated: bool = False
 
     def signed_distance(self, points: np.ndarray) -> np.ndarray:
         """Signed distances (n,) of points (n, 3) from the plane, positive on the room side."""
@@ -119,8 +124,11 @@ class Plane:
 
     def to_dict(self) -> dict:
         """JSON form (``structure`` entry of ``scene.json``)."""
-        return {"id": self.id, "kind": self.kind, "normal": [float(v) for v in self.normal],
-                "offset": float(self.offset)}
+        out = {"id": self.id, "kind": self.kind, "normal": [float(v) for v in self.normal],
+               "offset": float(self.offset)}
+        if self.estimated:
+            out["estimated"] = True
+        return out
 
 
 @dataclass
@@ -378,7 +386,8 @@ def _load_structure(path: Path, entries: list[dict], object_ids: set[str]) -> li
             raise InputError(path, f"{where}.normal", f"must be a finite unit vector, got {n.tolist()}")
         if not np.isfinite(d["offset"]):
             raise InputError(path, f"{where}.offset", f"must be finite, got {d['offset']}")
-        planes.append(Plane(id=d["id"], kind=d["kind"], normal=tuple(float(v) for v in n), offset=float(d["offset"])))
+        planes.append(Plane(id=d["id"], kind=d["kind"], normal=tuple(float(v) for v in n), offset=float(d["offset"]),
+                            estimated=bool(d.get("estimated", False))))
     return planes
 
 

@@ -16,8 +16,11 @@ furniture a few centimetres behind the paintings above it (7 to 18 cm on the RES
 than ``max_behind`` behind the evidence means the evidence is not a wall the scene stands against (a curtain's
 folds give a wrong normal, a panel that is not on a wall), and that group gives no wall.
 
-The planes become the scene's :attr:`~phiscene.scene.Scene.structure`: static colliders in every simulator, and
-supporters an object leans on (:mod:`phiscene.topology.leaning`). Walls a scene gives are never replaced.
+The planes become the scene's :attr:`~phiscene.scene.Scene.structure` (marked
+:attr:`~phiscene.scene.Plane.estimated`): static colliders in every simulator, and supporters an object leans on
+(:mod:`phiscene.topology.leaning`). The objects they come from are fixed to them and stay exactly where the input
+has them: unlike on a given wall, they are not made flush with it (the plane is their own average). Walls a scene
+gives are never replaced.
 """
 
 from __future__ import annotations
@@ -174,7 +177,7 @@ def estimate_walls(scene: Scene, params: WallParams = WallParams(), eye: np.ndar
             k += 1
         name = f"wall_{k}"
         taken.add(name)
-        planes.append(Plane(name, "wall", tuple(float(v) for v in n), float(offset)))
+        planes.append(Plane(name, "wall", tuple(float(v) for v in n), float(offset), estimated=True))
         walls.append({"id": name, "evidence": g.ids, "normal": [round(float(v), 6) for v in n],
                       "offset": round(float(offset), 6), "pushed_back": round(max(depth, 0.0), 6),
                       "pushed_by": deepest if depth > 0.0 else None})

@@ -318,12 +318,13 @@ def _flush_attached(scene: Scene, oid: str, obj, proxy: Proxy | None, holder: st
                     cache_dir: Path, rec: dict) -> np.ndarray:
     """The pose (4, 4) of an attached object made flush with the wall or ceiling holding it
     (:func:`~phiscene.assembly.faithful.flush_attached`; its input pose when the holder is not a plane of
-    ``scene.structure``: the ground stands for an unknown wall), then lifted out of the floor when its mesh
+    ``scene.structure``, the ground standing for an unknown wall, or is an estimated one, which is where the
+    objects it comes from are), then lifted out of the floor when its mesh
     reaches at most ``ATTACH_REACH`` below it (a floor-length curtain a depth error pushed through the floor;
     lifting it slides it along its wall). Fills ``rec`` (``flush_angle`` deg, ``attach_shift`` m,
     ``attach_lift`` m)."""
     pose = np.asarray(obj.pose, dtype=float)
-    plane = next((q for q in scene.structure if q.id == holder), None)
+    plane = next((q for q in scene.structure if q.id == holder and not q.estimated), None)
     out = pose if plane is None else _flushed_on(plane, obj, proxy, pose, max_angle_deg, cache_dir, rec)
     below = scene.ground_height - float(transform_points(out, np.asarray(obj.mesh().vertices))[:, 2].min())
     lift = below if 0.0 < below <= fa.ATTACH_REACH else 0.0
