@@ -260,6 +260,19 @@ def test_import_meshes_layout_keeps_file_mesh(initial, tmp_path):
                            atol=1e-6)
 
 
+def test_same_frame_import_keeps_the_walls(initial, tmp_path):
+    from dataclasses import replace
+
+    from phiscene.scene import Plane
+
+    walled = replace(initial, structure=[Plane("wall_0", "wall", (1.0, 0.0, 0.0), 2.0, estimated=True)])
+    pred = tmp_path / "pred"
+    pred.mkdir()
+    (pred / "poses.json").write_text(json.dumps({k: v.tolist() for k, v in known_poses().items()}))
+    out, _ = import_external(pred, walled, tmp_path / "out" / "scene.json")
+    assert out.structure == walled.structure and initial.structure == []
+
+
 def test_import_poses_layout_gives_poses_back(initial, tmp_path):
     pred = tmp_path / "pred"
     pred.mkdir()

@@ -155,3 +155,16 @@ def test_import_writes_the_estimated_wall_of_the_fixture_poster(tmp_path):
         assert float(wall.signed_distance(o.world_mesh().vertices).min()) >= -1e-6
     assert record["walls"]["walls"][0]["evidence"] == ["paper_poster_on_the_wall_000"]
     assert load_scene(tmp_path / "out" / "initial" / "scene.json").structure == scene.structure
+
+
+def test_a_peer_result_in_its_own_frame_does_not_take_our_walls(tmp_path):
+    # REST3D's result is in REST3D's frame: our estimated wall (in the levelled input's frame) would be misplaced
+    from phiscene.baselines.external import import_external
+
+    write_scene(tmp_path / "data", "scene_a", tilt_deg=(12.0, 4.0))
+    write_scene(tmp_path / "data", "scene_a", tilt_deg=(0.0, 0.0), variant="ours")
+    initial = import_rest3d(tmp_path / "data", "scene_a", tmp_path / "in")
+    assert len(initial.structure) == 1
+    out, rec = import_external(tmp_path / "data" / "assets" / "scene_a" / "ours", initial,
+                               tmp_path / "out" / "scene.json")
+    assert rec["layout"] == "rest3d" and out.structure == []

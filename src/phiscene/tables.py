@@ -58,7 +58,9 @@ ATTACHED_NOTE = ("Objects attached to a wall, the ceiling or the ground (``attac
                  "object at rest in the input that topples as a uniform solid) are simulated with it in both "
                  "simulators, and objects with a completed base (``bases``: remedy ``base``, for one whose round "
                  "bottom, a guess of its hidden side, cannot stand where the input has it at rest) with that "
-                 "flat piece under them.")
+                 "flat piece under them. Walls estimated from the objects hanging on them (``structure`` planes "
+                 "marked ``estimated``, phiscene.walls) are static colliders in every simulation of a scene in the "
+                 "input's frame; a method in its own frame (``rest3d``) is simulated without them.")
 #: Ablation table (paper Tab. 6): reference alignment (mask IoU in place of CLIP-I) + the physical metrics.
 ABLATION_COLUMNS = {"mask_iou": "max", **PHYS_COLUMNS}
 

@@ -32,7 +32,8 @@ when the folder holds exactly one ``.glb``/``.gltf`` file (or the path is
 such a file).
 
 The output keeps the initial scene's ids, descriptions, colours, object
-meta, camera and ground height. An object of the initial scene missing from
+meta, camera, ground height and, but for a ``rest3d`` result (its own frame),
+its walls and ceiling (``structure``). An object of the initial scene missing from
 the prediction raises :class:`~phiscene.errors.InputError` naming the
 folder and the missing ids; with ``missing="keep"`` it keeps its initial
 mesh and pose instead (listed in the log). Predicted objects that are not in
@@ -398,6 +399,9 @@ def import_external(pred_dir: str | Path, initial_scene: Scene | str | Path, out
               "objects": status, "extra": sorted(extra)}
     meta = {**initial.meta, "external": {"source": str(source), "layout": layout,
                                          "kept_initial": [k for k, v in status.items() if v == "kept_initial"]}}
-    scene = Scene(objects_out, ground_height=initial.ground_height, camera=initial.camera, meta=meta)
+    # walls and ceiling are the initial scene's in its frame; a rest3d result is in its own frame
+    structure = [] if layout == "rest3d" else list(initial.structure)
+    scene = Scene(objects_out, ground_height=initial.ground_height, camera=initial.camera, meta=meta,
+                  structure=structure)
     save_scene(scene, out_path)
     return load_scene(out_path), record
