@@ -4,6 +4,7 @@ plank that leans on an estimated wall as it would on a given one."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -106,11 +107,12 @@ def test_given_walls_are_kept_and_estimation_can_be_off(meshes):
     assert estimate_walls(floor_board).planes == []
 
 
-@pytest.mark.parametrize("walls", [True, False])
-def test_plank_leans_on_the_wall_its_poster_stands_for(meshes, tmp_path, walls):
-    # the ladder of tests/test_clutter.py, with no given wall: a poster on the wall x = 0 is the only evidence of it.
-    # Estimated, the wall keeps the plank leaning (statics: mu_ground >= tan(30 deg) / 2 = 0.29; pybullet combines
-    # 0.8 * 0.8 = 0.64) and is its supporter; without the estimate the plank falls flat
+@pytest.mark.parametrize("evidence", ["poster", "words", None])
+def test_plank_leans_on_the_wall_its_poster_or_its_description_stands_for(meshes, tmp_path, evidence):
+    # the ladder of tests/test_clutter.py, with no given wall. Its only evidence: a poster on the wall x = 0, or the
+    # plank's description ("leaning against the wall"; the plank's top leans towards -x). Estimated, the wall keeps
+    # the plank leaning (statics: mu_ground >= tan(30 deg) / 2 = 0.29; pybullet combines 0.8 * 0.8 = 0.64) and is
+    # its supporter; without evidence the plank falls flat
     from phiscene import topology
 
     sim = SimSettings()
@@ -119,24 +121,42 @@ def test_plank_leans_on_the_wall_its_poster_stands_for(meshes, tmp_path, walls):
     # would turn 3 deg; fixed to the one it stands for, it stays as put)
     R = trimesh.transformations.rotation_matrix(np.radians(-3.0), [0, 1, 0])[:3, :3]
     back = (trimesh.creation.box((0.01, 0.6, 0.8)).vertices @ R.T)[:, 0].min()
-    scene = Scene([obj(meshes, "poster", "poster", make_pose(R, (-back, 0.0, 1.6)), "paper poster on the wall"),
-                   obj(meshes, "plank", "plank", leaning_pose(PLANK, 60.0), "wooden plank")])
-    est = estimate_walls(scene, WallParams(enabled=walls))
+    poster = obj(meshes, "poster", "poster", make_pose(R, (-back, 0.0, 1.6)),
+                 "paper poster on the wall" if evidence == "poster" else "paper poster")
+    plank = obj(meshes, "plank", "plank", leaning_pose(PLANK, 60.0),
+                "wooden plank leaning against the wall" if evidence == "words" else "wooden plank")
+    scene = Scene([poster, plank] if evidence == "poster" else [plank])
+    est = estimate_walls(scene)
+    assert [w["evidence"] for w in est.record["walls"]] == ([[evidence if evidence == "poster" else "plank"]]
+                                                            if evidence else [])
+    if evidence:
+        assert np.allclose(est.planes[0].normal, (1, 0, 0), atol=1e-9)
+        assert est.planes[0].offset == pytest.approx(0.0, abs=1e-9)
     scene = Scene(scene.objects, structure=est.planes)
     graph = topology.infer(scene, "geometric", {})
-    assert attached_ids(graph, holders=True) == {"poster": "wall_0" if walls else "ground"}
-    assert sorted(graph.parents("plank")) == (["ground", "wall_0"] if walls else ["ground"])
+    assert sorted(graph.parents("plank")) == (["ground", "wall_0"] if evidence else ["ground"])
     params = AssemblyParams.from_dict({"faithful": {"enabled": True}})
     out, record = ground_scene(scene, graph.order, convex_proxies(scene, tmp_path), params, sim, tmp_path,
-                             graph=graph, attached=attached_ids(graph, holders=True))
+                               graph=graph, attached=attached_ids(graph, holders=True))
     cert = record["objects"]["plank"]["certificate"]
-    assert record["objects"]["poster"]["settle_remedy"] == "attached"
-    assert np.array_equal(out.get("poster").pose, scene.get("poster").pose)  # kept exactly where it was put
-    if walls:
+    if evidence == "poster":
+        assert attached_ids(graph, holders=True) == {"poster": "wall_0"}
+        assert record["objects"]["poster"]["settle_remedy"] == "attached"
+        assert np.array_equal(out.get("poster").pose, scene.get("poster").pose)  # kept exactly where it was put
+    if evidence:
         assert cert["settled"] and cert["supporters_kept"] and cert["rotation_change"] < 1.0
         assert cert["displacement"] < 0.01
     else:
         assert cert["rotation_change"] > 20.0
+
+
+def test_a_board_standing_against_the_wall_gives_the_wall_behind_it(meshes):
+    # upright (no lean), so its thin axis turned towards the camera is the wall's normal; the wall touches its back
+    board = obj(meshes, "board", "poster", make_pose(translation=(-0.995, 0.0, 0.4)), "white board against the wall")
+    est = estimate_walls(Scene([board]), eye=np.array([3.0, 0.0, 1.5]))
+    assert np.allclose(est.planes[0].normal, (1, 0, 0), atol=1e-9)
+    assert est.planes[0].offset == pytest.approx(1.0, abs=1e-9)
+    assert estimate_walls(Scene([replace(board, description="white board")])).planes == []
 
 
 def test_import_writes_the_estimated_wall_of_the_fixture_poster(tmp_path):

@@ -6,7 +6,11 @@ paintings, whiteboards, windows, clocks. Each such object (decided attached by
 :func:`phiscene.topology.attached.attached_objects`, for any reason but ``partial`` or ``ceiling``) that is a thin
 vertical panel (:func:`phiscene.topology.attached.panel_normal`) is one piece of evidence: its thin axis, made
 horizontal and turned towards the room (the camera's eye when known, else the centre of the free objects), is a
-wall's normal, and its back face lies on that wall.
+wall's normal, and its back face lies on that wall. So is a free object whose description says it stands or leans
+against a wall (:func:`phiscene.topology.words.says_against_wall`: "mattress leaning against wall"): the wall
+faces away from the way its top leans over its bottom (:func:`_lean_normal`, when it leans at least
+:data:`MIN_LEAN_DEG`; else its thin axis if it is a panel, turned towards the room) and touches its rearmost point.
+Nothing in the scene shows a wall that nothing hangs on or leans on, so such walls stay unknown.
 
 :func:`estimate_walls` groups the evidence: panels whose normals agree within ``merge_deg`` and whose backs lie
 within ``merge_gap`` of each other along that normal are one wall (largest panel first; the normal is the
@@ -31,10 +35,15 @@ import numpy as np
 
 from phiscene.params import Params
 from phiscene.scene import Plane, Scene
-from phiscene.topology.attached import PARTIAL, AttachedParams, attached_objects, panel_normal
+from phiscene.topology.attached import PARTIAL, AttachedParams, attached_objects, object_text, panel_normal
+from phiscene.topology.words import says_against_wall
 
 #: Attachment reasons that are not evidence of a wall (a furniture fragment; a ceiling fixture).
 NOT_WALL_EVIDENCE = (PARTIAL, "ceiling")
+#: A free object against a wall leans on it when its top is at least this far (deg) off vertical over its bottom.
+MIN_LEAN_DEG = 5.0
+#: Share of an object's height whose vertices make its top and its bottom (:func:`_lean_normal`).
+LEAN_BAND = 0.1
 
 
 @dataclass(frozen=True)
@@ -108,6 +117,21 @@ def _horizontal(v: np.ndarray) -> np.ndarray | None:
     return h / norm if norm > 1e-9 else None
 
 
+def _lean_normal(points: np.ndarray) -> np.ndarray | None:
+    """The normal (3,) of the wall an object leans on: horizontal, opposite to the way its top leans over its bottom
+    (the mean of its vertices in the top and the bottom :data:`LEAN_BAND` of its height), or ``None`` when it leans
+    less than :data:`MIN_LEAN_DEG`. ``points`` (n, 3): its vertices in the world frame."""
+    z = points[:, 2]
+    lo, hi = float(z.min()), float(z.max())
+    band = LEAN_BAND * (hi - lo)
+    if hi - lo <= 0.0:
+        return None
+    d = points[z >= hi - band].mean(axis=0) - points[z <= lo + band].mean(axis=0)
+    if np.degrees(np.arctan2(np.hypot(d[0], d[1]), max(d[2], 1e-12))) < MIN_LEAN_DEG:
+        return None
+    return _horizontal(-d)
+
+
 def _angle(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(a @ b, -1.0, 1.0))))
 
@@ -140,17 +164,20 @@ def estimate_walls(scene: Scene, params: WallParams = WallParams(), eye: np.ndar
     centres = [world[o].bounds.mean(axis=0) for o in (free or scene.ids)]
     ref = np.asarray(eye, dtype=float) if eye is not None else np.mean(centres, axis=0)
     evidence = []
-    for oid, why in decided.items():
-        if why in NOT_WALL_EVIDENCE:
+    for o in scene.objects:
+        why = decided.get(o.id)
+        if why in NOT_WALL_EVIDENCE or (why is None and not says_against_wall(object_text(o))):
             continue
-        axis = panel_normal(world[oid], attached.thin_ratio)
-        n = None if axis is None else _horizontal(axis)
+        points = np.asarray(world[o.id].vertices, dtype=float)
+        n = _lean_normal(points) if why is None else None  # a free object against a wall: the way it leans
+        if n is None:
+            axis = panel_normal(world[o.id], attached.thin_ratio)
+            n = None if axis is None else _horizontal(axis)
+            if n is not None and (ref - points.mean(axis=0)) @ n < 0.0:
+                n = -n
         if n is None:
             continue
-        points = np.asarray(world[oid].vertices, dtype=float)
-        if (ref - points.mean(axis=0)) @ n < 0.0:
-            n = -n
-        evidence.append((oid, n, float(world[oid].convex_hull.area) / 2.0, points))
+        evidence.append((o.id, n, float(world[o.id].convex_hull.area) / 2.0, points))
     groups: list[_Group] = []
     for oid, n, weight, points in sorted(evidence, key=lambda e: (-e[2], e[0])):
         for g in groups:

@@ -164,7 +164,7 @@ def _held_from_below(scene, oid: str, world: dict, ground: float, params: Attach
     return False
 
 
-def _text(obj) -> str:
+def object_text(obj) -> str:
     """An object's description, or its id read as words."""
     return obj.description or obj.id.replace("_", " ")
 
@@ -197,21 +197,21 @@ def attached_objects(scene, params: AttachedParams = AttachedParams()) -> dict[s
     # what holds nothing from below: wall objects other than building fixtures (posters overlapping on a wall;
     # a window's sill or the top of a radiator does hold a plant)
     holds_nothing = frozenset(o.id for o in scene.objects
-                              if names_wall_object(_text(o)) and not names_fixture(_text(o)))
+                              if names_wall_object(object_text(o)) and not names_fixture(object_text(o)))
     for o in scene.objects:
         if o.id in out:
             continue
-        if names_fixture(_text(o)):
+        if names_fixture(object_text(o)):
             out[o.id] = "fixture"
             continue
         m = world[o.id]
         lo, hi = m.bounds
-        fragment = params.partial and is_fragment(_text(o), lo[2], hi[2], ground, params)
+        fragment = params.partial and is_fragment(object_text(o), lo[2], hi[2], ground, params)
         if lo[2] - ground < params.min_height:
             why = PARTIAL if fragment else None  # low: only a fragment the description calls partial
         else:
             ceiling = room and top - hi[2] <= params.ceiling_gap
-            why = "description" if says_mounted(_text(o)) else PARTIAL if fragment else \
+            why = "description" if says_mounted(object_text(o)) else PARTIAL if fragment else \
                 "panel" if panel_normal(m, params.thin_ratio) is not None else "ceiling" if ceiling else None
         if why is None or _held_from_below(scene, o.id, world, ground, params, holds_nothing):
             continue

@@ -23,6 +23,9 @@ HEAD_END = ("on", "under", "in", "at", "by", "near", "beside", "above", "below",
 #: Phrases saying an object is mounted (matched in the lower-case description).
 MOUNT_PHRASES = ("on the wall", "on wall", "wall mounted", "wall-mounted", "mounted", "hanging", "hung",
                  "on the ceiling", "from the ceiling", "ceiling")
+#: A description saying an object stands or leans against a wall ("mattress leaning against wall", "plank against
+#: the back wall", "board leaning on the wall").
+AGAINST_WALL = re.compile(r"\b(against|leaning on|leans on|propped on)\s+(the\s+|a\s+)?([a-z]+\s+)?wall\b")
 #: Words saying an object is seen only in part (its lower part may be missing from the reconstruction).
 PARTIAL_WORDS = ("partially", "partly", "partial", "occluded", "truncated", "cropped", "cut")
 
@@ -83,3 +86,8 @@ def head_noun(description: str) -> str:
 def names_furniture(description: str) -> bool:
     """Whether a description's head noun (:func:`head_noun`) is floor furniture (:data:`FURNITURE_WORDS`)."""
     return head_noun(description) in FURNITURE_WORDS
+
+
+def says_against_wall(description: str) -> bool:
+    """Whether a description says the object stands or leans against a wall (:data:`AGAINST_WALL`)."""
+    return AGAINST_WALL.search(description.lower().replace("_", " ")) is not None
