@@ -216,3 +216,30 @@ def test_unreachable_endpoint_fails_the_job_not_the_scene():
 
     # an unreachable service is a setup problem (the job fails); a bad answer is about this scene
     assert MllmError("x").per_scene is False and MllmResponseError("x").per_scene is True
+
+
+def test_walls_are_named_in_the_prompt_and_kept_as_supporters(server, scene, tmp_path):
+    # the side box against the wall x = 0.7 (normal -x): the answer's wall edge is kept, one into the wall dropped
+    from dataclasses import replace
+
+    from phiscene.scene import Plane
+
+    walled = replace(scene, structure=[Plane("wall_0", "wall", (-1.0, 0.0, 0.0), 0.7, estimated=True)])
+    FakeModel.answers = [(0, json.dumps({"objects": ["Plane", "base", "cube", "side", "wall_0"], "edges": [
+        {"from": "Plane", "to": "base", "confidence": 0.9}, {"from": "base", "to": "cube", "confidence": 0.9},
+        {"from": "Plane", "to": "side", "confidence": 0.9},
+        {"from": "wall_0", "to": "side", "relation": "leans_on", "confidence": 0.7},
+        {"from": "side", "to": "wall_0", "confidence": 0.2}]}))]
+    g = topology.infer(walled, "mllm", settings(server, tmp_path))
+    assert g.parents("side") == ["ground", "wall_0"] and g.structure == ["wall_0"]
+    assert any("into the ground or a wall (side -> wall_0)" in r for r in g.meta["repairs"])
+    text = FakeModel.seen[0]["body"]["messages"][1]["content"][2]["text"]
+    assert "The wall names are:\n  - wall_0\n" in text and text.index("wall_0") < text.index("Object list")
+    meta = json.loads(text.split("Scene metadata (JSON):\n", 1)[1])
+    assert meta["walls"] == [{"name": "wall_0", "normal": [-1.0, 0.0, 0.0], "offset": 0.7}]
+    # a scene without walls gets the paper's prompt: nothing about walls
+    FakeModel.answers = [(0, VALID)]
+    topology.infer(scene, "mllm", settings(server, tmp_path / "other"))
+    plain = FakeModel.seen[1]["body"]["messages"][1]["content"][2]["text"]
+    assert "wall_0" not in plain and "The wall names" not in plain and '"walls"' not in plain
+

@@ -4,7 +4,9 @@ Supporting Topology Inference").
 Inputs sent: the reference image, the instance segmentation and a JSON list of per-object metadata
 (:func:`object_metadata`: id, description, instance RGB colour, world AABB, OBB, top-down footprint), with
 the paper's system prompt (:data:`SYSTEM_PROMPT`) and user prompt (:func:`user_prompt`, ending in the
-object list). The images are found as ``params.image`` / ``params.segmentation``, else next to the
+object list). A scene with walls (its ``structure``: given, or estimated by :mod:`phiscene.walls`) also lists them in
+the metadata (``walls``: name, normal, offset) and the prompt names them as supporters of what leans on them
+(relation ``leans_on``); a scene without walls gets the paper's prompt unchanged. The images are found as ``params.image`` / ``params.segmentation``, else next to the
 scene's camera file, else in ``../reference/`` of the scene file (the benchmark layout).
 
 Providers (optional extra ``mllm``: ``pip install 'phiscene[mllm]'``, imported lazily):
@@ -28,7 +30,7 @@ each is an error (:class:`MllmResponseError`, naming the cached response file):
 * text around the JSON object (a Markdown code fence, a preamble) is stripped;
 * the ground is ``Plane`` (the prompt's schema) or ``ground``; other spellings (``floor``, ``PLANE``,
   ``ground plane``) are read as the ground; object names are matched case-insensitively;
-* edges naming unknown objects, self loops and edges into the ground are dropped; duplicate edges keep the
+* edges naming unknown objects, self loops and edges into the ground or a wall are dropped; duplicate edges keep the
   most confident one; a relation other than ``supports``/``leans_on``/``contains``/``attached`` becomes ``supports``;
   a missing confidence becomes ``default_confidence``;
 * an object without any supporter gets ``ground -> object`` with ``fallback_confidence`` (the prompt's
@@ -219,9 +221,23 @@ def object_metadata(scene) -> list[dict]:
     return out
 
 
-def user_prompt(names: list[str]) -> str:
-    """The paper's user prompt, its object list filled with ``names``."""
-    return _USER_PROMPT + "\n".join(f"- {n}" for n in names)
+#: Added to the user prompt of a scene with walls (:attr:`phiscene.scene.Scene.structure`), before its object list.
+_WALL_PROMPT = """- The scene's walls are listed in the metadata ("walls": name, unit normal pointing into the room, and
+  offset d: a point p lies on the wall where normal . p + d = 0). A wall supports what leans against it: add an
+  edge wall_name -> object with relation "leans_on" (the object keeps its edge from the ground or the object it
+  stands on). A wall is never supported. The wall names are:
+"""
+
+
+def user_prompt(names: list[str], walls: list[str] | None = None) -> str:
+    """The paper's user prompt, its object list filled with ``names``; with ``walls`` (plane ids), the paragraph
+    that names them as supporters (a scene without walls gets the paper's prompt unchanged)."""
+    objects = "\n".join(f"- {n}" for n in names)
+    if not walls:
+        return _USER_PROMPT + objects
+    head, tail = _USER_PROMPT.split("\nReturn strict JSON", 1)
+    return (head + "\n" + _WALL_PROMPT + "\n".join(f"  - {w}" for w in walls) + "\n\nReturn strict JSON" + tail
+            + objects)
 
 
 @dataclass(frozen=True)
@@ -281,8 +297,14 @@ def reference_images(scene, params: MllmParams) -> tuple[Path, Path]:
 def build_request(scene, params: MllmParams) -> Request:
     """The request for ``scene``: prompts, metadata JSON and the two PNGs."""
     image, seg = reference_images(scene, params)
-    meta = json.dumps({"objects": object_metadata(scene), "units": "m", "up": "+z"}, indent=1)
-    return Request(SYSTEM_PROMPT, user_prompt(scene.ids), meta, image.read_bytes(), seg.read_bytes())
+    data = {"objects": object_metadata(scene), "units": "m", "up": "+z"}
+    walls = [p for p in scene.structure if p.kind == "wall"]
+    if walls:
+        data["walls"] = [{"name": p.id, "normal": [round(float(v), 6) for v in p.normal],
+                          "offset": round(float(p.offset), 6)} for p in walls]
+    meta = json.dumps(data, indent=1)
+    return Request(SYSTEM_PROMPT, user_prompt(scene.ids, [p.id for p in walls]), meta, image.read_bytes(),
+                   seg.read_bytes())
 
 
 # -- providers -------------------------------------------------------------------------------------------------------
@@ -430,7 +452,7 @@ def _json_object(text: str) -> dict:
 
 
 def parse_response(text: str, ids: list[str], repair: bool = True, fallback_confidence: float = 0.1,
-                   default_confidence: float = 0.5) -> tuple[list[SupportEdge], list[str]]:
+                   default_confidence: float = 0.5, walls: list[str] | None = None) -> tuple[list[SupportEdge], list[str]]:
     """Validate a model answer against the scene's object ids (module docstring for the rules).
 
     Parameters
@@ -441,6 +463,8 @@ def parse_response(text: str, ids: list[str], repair: bool = True, fallback_conf
         The scene's object ids.
     repair
         Apply the documented repairs; ``False`` makes each an error.
+    walls
+        The scene's wall ids: valid supporters (an edge into one is dropped, a repair).
 
     Returns
     -------
@@ -467,12 +491,13 @@ def parse_response(text: str, ids: list[str], repair: bool = True, fallback_conf
     edges_in = data.get("edges")
     if not isinstance(edges_in, list):
         raise MllmResponseError("response has no 'edges' list")
-    lower = {i.lower(): i for i in ids}
+    planes = set(walls or ())
+    lower = {i.lower(): i for i in [*ids, *planes]}
 
     def node(name, where: str) -> str | None:
         if not isinstance(name, str):
             raise MllmResponseError(f"{where}: expected a string, got {name!r}")
-        if name in ids:
+        if name in ids or name in planes:
             return name
         if name.strip().lower() in GROUND_ALIASES:
             if name not in (GROUND, "Plane"):  # "Plane" is the prompt schema's own name for the ground
@@ -498,8 +523,8 @@ def parse_response(text: str, ids: list[str], repair: bool = True, fallback_conf
             raise MllmResponseError(f"{where}.confidence: expected a number in [0, 1], got {conf!r}")
         if src is None or dst is None:
             continue
-        if dst == GROUND:
-            fix(f"{where}: an edge into the ground ({src} -> ground); dropped")
+        if dst == GROUND or dst in planes:
+            fix(f"{where}: an edge into the ground or a wall ({src} -> {dst}); dropped")
             continue
         if src == dst:
             fix(f"{where}: self loop on {src!r}; dropped")
@@ -536,9 +561,10 @@ def infer(scene, params: MllmParams = MllmParams()) -> SupportGraph:
     """
     request = build_request(scene, params)
     text, digest, cached = ask(request, params)
+    walls = [p.id for p in scene.structure if p.kind == "wall"]
     try:
         edges, repairs = parse_response(text, scene.ids, params.repair, params.fallback_confidence,
-                                        params.default_confidence)
+                                        params.default_confidence, walls)
     except MllmResponseError as exc:
         where = Path(params.cache_dir) / f"{digest}.json" if params.cache_dir else "response"
         raise MllmResponseError(f"{where}: {exc}") from None
@@ -546,6 +572,7 @@ def infer(scene, params: MllmParams = MllmParams()) -> SupportGraph:
         log.warning("mllm: repaired: %s", r)
     graph = SupportGraph(objects=scene.ids, edges=edges, backend="mllm",
                          meta={"provider": params.provider, "model": params.model, "request": digest,
-                               "cached": cached, "repairs": repairs})
+                               "cached": cached, "repairs": repairs},
+                         structure=[w for w in walls if any(e.source == w for e in edges)])
     check_graph(graph, None, scene.ids)
     return finalize(graph, scene=scene)
