@@ -188,3 +188,21 @@ def test_a_peer_result_in_its_own_frame_does_not_take_our_walls(tmp_path):
     out, rec = import_external(tmp_path / "data" / "assets" / "scene_a" / "ours", initial,
                                tmp_path / "out" / "scene.json")
     assert rec["layout"] == "rest3d" and out.structure == []
+
+
+@pytest.mark.parametrize("described", [True, False])
+def test_a_description_against_the_wall_makes_the_touching_wall_a_supporter(meshes, described):
+    # the cabinet box (0.4 deep) turned 5 deg about y, its top edge on the wall x = 0: its centre of mass stays over
+    # its base, so the geometry alone reads it as standing; its description says it leans on the wall it touches
+    from phiscene import topology
+
+    R = trimesh.transformations.rotation_matrix(np.radians(-5.0), [0, 1, 0])[:3, :3]
+    v = trimesh.creation.box((0.4, 0.8, 0.9)).vertices @ R.T
+    cab = obj(meshes, "cab", "cabinet", make_pose(R, (-v[:, 0].min(), 0.0, -v[:, 2].min())),
+              "wooden cabinet leaning against the wall" if described else "wooden cabinet")
+    scene = Scene([cab], structure=[Plane("wall_0", "wall", (1.0, 0.0, 0.0), 0.0)])
+    graph = topology.infer(scene, "geometric", {})
+    assert sorted(graph.parents("cab")) == (["ground", "wall_0"] if described else ["ground"])
+    if described:
+        (edge,) = [e for e in graph.edges if e.source == "wall_0"]
+        assert edge.relation == "leans_on"

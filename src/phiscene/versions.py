@@ -8,7 +8,7 @@ bumping one here after a behaviour change reruns exactly the affected jobs
 BENCHMARK = 8
 IMPORT = 11  # scenes imported from real data (rest3d_scene); BENCHMARK's number until they parted
 PROXIES = 4
-TOPOLOGY = 11
+TOPOLOGY = 12
 GROUND = 22
 METRICS = 8
 TABLES = 7

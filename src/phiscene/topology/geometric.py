@@ -96,6 +96,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from phiscene.topology.attached import object_text
 from phiscene.topology.contacts import (
     Body,
     Contact,
@@ -112,6 +113,7 @@ from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph
 from phiscene.topology.leaning import floating_tipping, leaned_on, tipping, tipping_partner
 from phiscene.topology.order import finalize
 from phiscene.topology.params import BackendParams
+from phiscene.topology.words import says_against_wall
 
 
 @dataclass(frozen=True)
@@ -594,6 +596,27 @@ def supporters_of(a: Body, contacts: ObjectContacts, ancestors: dict[str, set[st
     return edges, info
 
 
+def described_leaning(a: Body, planes, tol: float, params: GeometricParams) -> list[SupportEdge]:
+    """``leans_on`` edges from the walls an object whose description says it leans against a wall touches.
+
+    The geometry alone may read such an object as standing (a mattress whose foot a depth error sank 12 cm into
+    the floor has a wide base); its description and a wall plane touching its upper part (``min_contact_points``
+    of its samples above its lowest quarter within ``[-penetration_scale * tol, tol]`` of the plane) say it leans.
+    """
+    lo, hi = float(a.bounds[0, 2]), float(a.bounds[1, 2])
+    edges = []
+    for plane in planes:
+        if plane.kind != "wall":
+            continue
+        gap = plane.signed_distance(a.points)
+        near = (gap <= tol) & (gap >= -params.penetration_scale * tol) & (a.points[:, 2] > lo + 0.25 * (hi - lo))
+        if int(near.sum()) >= params.min_contact_points:
+            edges.append(SupportEdge(plane.id, a.id, "leans_on", _confidence(gap[near], 1.0, tol),
+                                     f"its description says it leans against a wall; {int(near.sum())} samples "
+                                     f"against {plane.id}"))
+    return edges
+
+
 def _tip_partner(a: Body, tip, supporters: list[str], ancestors: dict[str, set[str]], bodies: dict[str, Body],
                  params: GeometricParams, planes, lower: float, info: dict, why: str) -> list[SupportEdge]:
     """The ``leans_on`` edge to what ``a`` tips onto about the edge of ``tip`` (none when it lies down first),
@@ -721,6 +744,8 @@ def _supporters(scene, bodies: dict[str, Body], params: GeometricParams) -> tupl
     for o in scene.objects:
         e, info = supporters_of(bodies[o.id], contacts[o.id], ancestors, bodies, params, scene.structure,
                                 scene.ground_height)
+        if says_against_wall(object_text(o)) and not any(x.relation == "leans_on" for x in e):
+            e += described_leaning(bodies[o.id], scene.structure, contacts[o.id].tol[GROUND], params)
         edges += e
         diagnostics[o.id] = info
     edges, floor = floor_standing(edges, scene, {k: b.bounds for k, b in bodies.items()}, params.floor_reach)
