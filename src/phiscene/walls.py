@@ -96,6 +96,8 @@ class WallEstimate:
 
 @dataclass
 class _Group:
+    """Panels on one wall: their ids, horizontal normals (3,), weights (area, m^2) and world vertices (n, 3)."""
+
     ids: list[str]
     normals: list[np.ndarray]
     weights: list[float]
@@ -105,6 +107,13 @@ class _Group:
     def normal(self) -> np.ndarray:
         n = np.sum([w * v for w, v in zip(self.weights, self.normals)], axis=0)
         return n / np.linalg.norm(n)
+
+    def add(self, oid: str, normal: np.ndarray, weight: float, points: np.ndarray) -> None:
+        """One more panel of this wall."""
+        self.ids.append(oid)
+        self.normals.append(normal)
+        self.weights.append(weight)
+        self.points.append(points)
 
     def back(self, n: np.ndarray) -> float:
         """The rearmost point of the group along ``n``: min over its vertices of ``n . p``."""
@@ -123,9 +132,9 @@ def _lean_normal(points: np.ndarray) -> np.ndarray | None:
     less than :data:`MIN_LEAN_DEG`. ``points`` (n, 3): its vertices in the world frame."""
     z = points[:, 2]
     lo, hi = float(z.min()), float(z.max())
-    band = LEAN_BAND * (hi - lo)
     if hi - lo <= 0.0:
         return None
+    band = LEAN_BAND * (hi - lo)
     d = points[z >= hi - band].mean(axis=0) - points[z <= lo + band].mean(axis=0)
     if np.degrees(np.arctan2(np.hypot(d[0], d[1]), max(d[2], 1e-12))) < MIN_LEAN_DEG:
         return None
@@ -183,7 +192,7 @@ def estimate_walls(scene: Scene, params: WallParams = WallParams(), eye: np.ndar
         for g in groups:
             gn = g.normal
             if _angle(n, gn) <= params.merge_deg and abs(float((points @ gn).min()) - g.back(gn)) <= params.merge_gap:
-                g.ids.append(oid), g.normals.append(n), g.weights.append(weight), g.points.append(points)
+                g.add(oid, n, weight, points)
                 break
         else:
             groups.append(_Group([oid], [n], [weight], [points]))
