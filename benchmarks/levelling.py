@@ -12,6 +12,9 @@ motion REST3D's own simulation gave each object (fruit rolling off, a chair tipp
 ``ours`` counterpart by ICP (:func:`phiscene.metrics.reconstruction.icp`, started from the Kabsch rotation), each
 registration gives an up direction, and their robust mean (weights: ICP fitness over the angle to the current
 mean) is the up REST3D's frame implies for most objects; ``spread`` is the median angle of the per-object ups to it.
+A third check, ``walls``: the area-weighted mean angle from vertical of the wall objects that are thin panels
+(a description naming a wall object, :func:`phiscene.topology.words.names_wall_object`, and a minimum-volume box
+whose smallest extent is at most ``thin_ratio`` of its largest): posters and paintings hang nearly vertical.
 
     python benchmarks/levelling.py [ROOT] [SCENE ...]      # ROOT defaults to data/REST3D, scenes to all of them
 """
@@ -74,11 +77,32 @@ def plane_tilt(votes: dict, up: np.ndarray) -> float:
     return float((w * np.array([angle_deg(v["up"], up) for v in planes])).sum() / w.sum())
 
 
+def wall_tilt(objects, up: np.ndarray, thin_ratio: float = 0.15) -> float:
+    """Area-weighted mean angle (deg) from vertical (``up``, (3,) in the objects' frame) of the thin wall panels
+    among ``objects`` (:class:`phiscene.io.placed.PlacedObject`); NaN when there is none."""
+    from phiscene.meshes import oriented_box
+    from phiscene.topology.words import names_wall_object
+
+    tilts, weights = [], []
+    for o in objects:
+        if not names_wall_object(o.description):
+            continue
+        box = oriented_box(o.mesh)
+        extents = np.asarray(box.primitive.extents, dtype=float)
+        k = int(np.argmin(extents))
+        if extents[k] > thin_ratio * extents.max():
+            continue
+        axis = np.asarray(box.primitive.transform, dtype=float)[:3, k]
+        tilts.append(float(np.degrees(np.arcsin(min(1.0, abs(axis @ up) / np.linalg.norm(axis))))))
+        weights.append(float(np.prod(np.sort(extents)[1:])))
+    return float(np.average(tilts, weights=weights)) if tilts else float("nan")
+
+
 def main(argv: list[str]) -> None:
     root = argv[0] if argv else "data/REST3D"
     scenes = argv[1:] or scene_ids(root)
     print(f"{'scene':40s} {'ours':>6s} {'rest3d':>6s} {'between':>7s} {'icp':>5s} {'spread':>6s} {'ours|icp':>8s} "
-          f"{'planes|ours':>11s} {'planes|rest3d':>13s} {'s':>5s}")
+          f"{'planes|ours':>11s} {'planes|rest3d':>13s} {'walls|ours':>10s} {'walls|rest3d':>12s} {'s':>5s}")
     for scene in scenes:
         t0 = time.perf_counter()
         data = read_rest3d(root, scene, "sam3d")
@@ -90,6 +114,7 @@ def main(argv: list[str]) -> None:
         print(f"{scene:40s} {lev.rotation_deg:6.2f} {angle_deg(ref, [0.0, 1.0, 0.0]):6.2f} {angle_deg(ours, ref):7.2f} "
               f"{angle_deg(ref_icp, ref):5.2f} {spread:6.2f} {angle_deg(ours, ref_icp):8.2f} "
               f"{plane_tilt(lev.estimate.votes, A @ ours):11.2f} {plane_tilt(lev.estimate.votes, A @ ref):13.2f} "
+              f"{wall_tilt(data.objects, ours):10.2f} {wall_tilt(data.objects, ref):12.2f} "
               f"{time.perf_counter() - t0:5.1f}")
 
 
