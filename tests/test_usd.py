@@ -121,3 +121,32 @@ def test_validators_catch_a_broken_stage(tmp_path, exported):
     stage.GetRootLayer().Export(str(bad))
     errors = validate_usd(bad)
     assert any("MetersPerUnit" in e for e in errors) and any("upAxis" in e for e in errors), errors
+
+
+@pytest.mark.parametrize("wall", [True, False])
+def test_a_plank_leaning_on_a_wall_stays_in_the_exported_stage(tmp_path, wall):
+    # the ladder of tests/test_clutter.py (statics: mu >= tan 30 deg / 2) on an estimated wall, x = 0 turned 20 deg
+    # about z: the stage holds the wall as a static plane, read back as written, and the plank stays; exported
+    # without it, it falls
+    from scenes import leaning_pose
+
+    from phiscene.proxies import proxy_for_mesh
+    from phiscene.scene import Plane
+
+    size = (0.6, 0.08, 0.02)
+    turn = make_pose(rotation_z(np.radians(20.0)))
+    normal = tuple(float(v) for v in turn[:3, :3] @ [1.0, 0.0, 0.0])
+    plank = SceneObject("plank", save_mesh(trimesh.creation.box(size), tmp_path / "plank.obj"),
+                        turn @ leaning_pose(size, 60.0), "wooden plank")
+    planes = [Plane("wall_0", "wall", normal, 0.0, estimated=True)] if wall else []
+    scene = Scene([plank], structure=planes)
+    proxies = {"plank": proxy_for_mesh(plank.mesh_path, ProxyParams(backend="convex"), tmp_path / "cache")}
+    path = export_usd(scene, proxies, tmp_path / "scene.usda", SIM)
+    read = read_usd_scene(path)
+    assert len(read["structure"]) == len(planes)
+    for got, want in zip(read["structure"], planes):
+        assert (got.id, got.kind, got.estimated) == (want.id, want.kind, want.estimated)
+        assert np.allclose(got.normal, want.normal, atol=1e-9) and got.offset == pytest.approx(want.offset, abs=1e-9)
+    assert validate_usd(path) == []
+    drift = release_usd(path, 2.0, 0.0, tmp_path / "cache")["drift_trans"]
+    assert drift < 5e-3 if wall else drift > 0.05

@@ -7,6 +7,9 @@
     /World/Looks/PhysicsMaterial   UsdShade.Material + UsdPhysics.MaterialAPI: static/dynamic friction,
                                    restitution (SimSettings), bound with the "physics" purpose
     /World/Ground                  UsdGeom.Plane (axis Z) at the ground height, static collider
+    /World/Structure/<name>        UsdGeom.Plane per wall or ceiling of the scene (its local +z the plane's normal,
+                                   into the room), static collider; customData ``phiscene:id``, ``phiscene:kind``,
+                                   ``phiscene:estimated``
     /World/Objects/<name>          Xform at the object's settled pose (translate + orient: the pose's uniform
                                    scale is baked into the points below, so mass properties need no rescaling)
         visual                     UsdGeom.Mesh, the object's mesh, displayColor from its colour
@@ -51,8 +54,9 @@ if TYPE_CHECKING:
 #: Gravity magnitude written to the physics scene (m/s^2); the pipeline's worlds use the same.
 GRAVITY = 9.81
 #: Prim paths of the stage.
-WORLD, OBJECTS, GROUND_PRIM, MATERIAL, PHYSICS_SCENE = (
-    "/World", "/World/Objects", "/World/Ground", "/World/Looks/PhysicsMaterial", "/World/PhysicsScene")
+WORLD, OBJECTS, GROUND_PRIM, MATERIAL, PHYSICS_SCENE, STRUCTURE = (
+    "/World", "/World/Objects", "/World/Ground", "/World/Looks/PhysicsMaterial", "/World/PhysicsScene",
+    "/World/Structure")
 #: Half size (m) of the ground plane's visible extent (a UsdGeom.Plane collider is infinite).
 GROUND_EXTENT = 50.0
 
@@ -153,6 +157,8 @@ def export_usd(scene: "Scene", proxies: dict[str, "Proxy"], path: str | Path, si
     ground.CreateLengthAttr(2 * GROUND_EXTENT)
     ground.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, float(scene.ground_height)))
     _collider(ground.GetPrim(), mat, approximation=None)
+    if scene.structure:
+        _structure(stage, scene.structure, mat)
 
     UsdGeom.Scope.Define(stage, OBJECTS)
     names: dict[str, str] = {}
@@ -209,6 +215,48 @@ def export_usd(scene: "Scene", proxies: dict[str, "Proxy"], path: str | Path, si
     return path
 
 
+def _structure(stage, planes, mat) -> None:
+    """Walls and ceiling (:class:`phiscene.scene.Plane`) as static UsdGeom.Plane colliders under :data:`STRUCTURE`:
+    each prim's local +z axis is the plane's normal and its origin the plane's point nearest the world origin."""
+    from pxr import Gf, UsdGeom
+
+    from phiscene.levelling import rotation_between
+
+    UsdGeom.Scope.Define(stage, STRUCTURE)
+    for plane in planes:
+        n = np.asarray(plane.normal, dtype=float)
+        geom = UsdGeom.Plane.Define(stage, f"{STRUCTURE}/{_prim_name(plane.id)}")
+        geom.CreateAxisAttr(UsdGeom.Tokens.z)
+        geom.CreateWidthAttr(2 * GROUND_EXTENT)
+        geom.CreateLengthAttr(2 * GROUND_EXTENT)
+        geom.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, -float(plane.offset) * n)))
+        w, x, y, z = matrix_to_quat_wxyz(rotation_between([0.0, 0.0, 1.0], n))
+        geom.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(float(w), Gf.Vec3d(float(x), float(y),
+                                                                                         float(z))))
+        prim = geom.GetPrim()
+        prim.SetCustomDataByKey("phiscene:id", plane.id)
+        prim.SetCustomDataByKey("phiscene:kind", plane.kind)
+        prim.SetCustomDataByKey("phiscene:estimated", bool(plane.estimated))
+        _collider(prim, mat, approximation=None)
+
+
+def _read_structure(stage, time) -> list:
+    """The :class:`phiscene.scene.Plane` of every prim under :data:`STRUCTURE` (empty when there is none)."""
+    from pxr import UsdGeom
+
+    from phiscene.scene import Plane
+
+    root = stage.GetPrimAtPath(STRUCTURE)
+    planes = []
+    for prim in (root.GetChildren() if root else []):
+        T = _np(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time)).T  # USD: row vectors
+        n = T[:3, 2] / np.linalg.norm(T[:3, 2])
+        planes.append(Plane(prim.GetCustomDataByKey("phiscene:id") or prim.GetName(),
+                            prim.GetCustomDataByKey("phiscene:kind") or "wall", tuple(float(v) for v in n),
+                            -float(n @ T[:3, 3]), bool(prim.GetCustomDataByKey("phiscene:estimated"))))
+    return planes
+
+
 def _np(m) -> np.ndarray:
     return np.array([[m[i][j] for j in range(4)] for i in range(4)], dtype=float)
 
@@ -220,6 +268,7 @@ def read_usd_scene(path: str | Path) -> dict:
     -------
     ``{"up_axis": str, "meters_per_unit": float, "kilograms_per_unit": float, "gravity": (3,) m/s^2,
     "friction": float, "restitution": float, "ground_height": float, "sim": dict, "support_graph": dict | None,
+    "structure": [phiscene.scene.Plane],
     "objects": {id: {"pose": (4, 4) rigid, "static": bool, "mass", "com": (3,), "inertia": (3, 3) about the
     com in the object frame, "hulls": [(v, 3) object-frame vertices], "supporters": [...]}}}``
 
@@ -250,7 +299,7 @@ def read_usd_scene(path: str | Path) -> dict:
                                       .ComputeLocalToWorldTransform(time))[3, 2]),
            "sim": json.loads(data["phiscene:sim"]) if "phiscene:sim" in data else None,
            "support_graph": json.loads(data["phiscene:support_graph"]) if "phiscene:support_graph" in data else None,
-           "objects": {}}
+           "structure": _read_structure(stage, time), "objects": {}}
     for prim in stage.GetPrimAtPath(OBJECTS).GetChildren():
         oid = prim.GetCustomDataByKey("phiscene:id") or prim.GetName()
         pose = _np(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time)).T  # USD: row vectors
@@ -280,8 +329,9 @@ def release_usd(path: str | Path, seconds: float, upward_offset: float = 0.0, ca
     """Drift of an exported stage rebuilt in a fresh pybullet world from what :func:`read_usd_scene` reads.
 
     Bodies are the re-read hulls with the re-read mass, centre of mass and inertia; static objects are fixed
-    colliders; the ground is the re-read ground height; the world settings come from the stage (friction and
-    restitution from its physics material, the rest from ``phiscene:sim``, or ``sim``). Every free body is lifted
+    colliders; the ground is the re-read ground height, the walls and ceiling the re-read planes; the world
+    settings come from the stage (friction and restitution from its physics material, the rest from
+    ``phiscene:sim``, or ``sim``). Every free body is lifted
     by ``upward_offset`` and the world runs ``seconds``; drift as in
     :func:`phiscene.metrics.drift.drift_bullet` (centre of mass from before the lift, rotation in degrees).
 
@@ -301,6 +351,7 @@ def release_usd(path: str | Path, seconds: float, upward_offset: float = 0.0, ca
     lift = make_pose(translation=[0.0, 0.0, float(upward_offset)])
     with tempfile.TemporaryDirectory() as tmp, BulletWorld(settings, cache_dir or tmp) as world:
         world.add_ground(data["ground_height"])
+        world.add_structure(data["structure"])  # walls and ceiling: static planes
         for oid, o in data["objects"].items():
             if o["static"]:
                 world.add_body(oid, o["hulls"], o["pose"], None)
