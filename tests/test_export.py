@@ -260,3 +260,27 @@ def test_cli_export(bridge, tmp_path, capsys):
     assert "scene.glb" in capsys.readouterr().out
     assert (tmp_path / "out" / "scene.xml").is_file() and (tmp_path / "out" / "urdf" / "plank.urdf").is_file()
     assert math.isclose(json.loads((tmp_path / "out" / "export.json").read_text())["masses"]["box_a"], 0.5)
+
+
+@pytest.mark.parametrize("fmt", ["urdf", "mjcf"])
+@pytest.mark.parametrize("wall", [True, False])
+def test_a_plank_leaning_on_a_wall_stays_in_the_exported_urdf_and_mjcf(tmp_path, fmt, wall):
+    # the ladder of tests/test_clutter.py (statics: mu >= tan 30 deg / 2) on the wall x = 0 turned 20 deg about z:
+    # each export carries the wall, and released for 2 s the plank stays; exported without it, it falls
+    from scenes import leaning_pose
+
+    from phiscene.scene import Plane
+
+    size = (0.6, 0.08, 0.02)
+    turn = make_pose(rotation_z(np.radians(20.0)))
+    normal = tuple(float(v) for v in turn[:3, :3] @ [1.0, 0.0, 0.0])
+    plank = SceneObject("plank", save_mesh(trimesh.creation.box(size), tmp_path / "plank.obj"),
+                        turn @ leaning_pose(size, 60.0), "wooden plank")
+    scene = Scene([plank], structure=[Plane("wall_0", "wall", normal, 0.0, estimated=True)] if wall else [])
+    proxies = {"plank": proxy_for_mesh(plank.mesh_path, ProxyParams(backend="convex"), tmp_path / "cache")}
+    sim = SimSettings()
+    if fmt == "urdf":
+        drift = ex.release_urdf(ex.export_urdf(scene, proxies, tmp_path / "out", sim), 2.0)["drift_trans"]
+    else:
+        drift = ex.release_mjcf(ex.export_mjcf(scene, proxies, tmp_path / "scene.xml", sim), 2.0)["drift_trans"]
+    assert drift < 5e-3 if wall else drift > 0.05

@@ -1,7 +1,7 @@
 # Settings and helpers of workflow/rules/export.smk (kept apart: the linter wants rules and functions in separate files).
 
 #: Bump after a behaviour change of phiscene.io.export or phiscene.demo (reruns exactly these jobs).
-EXPORT_VERSION = 2
+EXPORT_VERSION = 3
 EXPORT = config.get("export", {})
 EXPORT_METHODS = EXPORT.get("methods", ["phi_scene"])
 EXPORT_SUITES = EXPORT.get("suites", [s for s in ["contact"] if s in config["suites"]])

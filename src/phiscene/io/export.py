@@ -7,7 +7,8 @@ call of :func:`export_scene` writes into an output folder::
     scene.glb               visual meshes at their poses (one glTF node per object, +Y up)
     scene.xml               MJCF (mujoco.MjSpec): free bodies, convex hull meshes, visual meshes,
                             the pipeline's contact and solver settings, a ground plane
-    scene_urdf.json         the URDF scene index: world settings, ground and per-object URDF + pose
+    scene_urdf.json         the URDF scene index: world settings, ground, walls and ceiling (``structure``: the
+                            ground slab's URDF posed so that its top face is the plane), per-object URDF + pose
     urdf/<id>.urdf          one link per object: visual mesh, convex proxies as collision, inertial
     urdf/ground.urdf        the static ground slab
     meshes/<id>/visual.obj  the object's mesh in its link frame (pose scale applied)
@@ -352,7 +353,8 @@ def export_urdf(scene: "Scene", proxies: dict[str, "Proxy"], out_dir: str | Path
                         "description": o.description})
     index = {
         "format": URDF_SCENE_FORMAT, "units": "m", "up": [0, 0, 1],
-        "how_to_load": "pybullet: loadURDF(ground.urdf, ground.position, useFixedBase=True); per object "
+        "how_to_load": "pybullet: loadURDF(ground.urdf, ground.position, useFixedBase=True), the same for each "
+                       "structure entry (walls, ceiling) at its position and orientation_xyzw; per object "
                        "loadURDF(urdf, position, orientation_xyzw, flags=URDF_USE_INERTIA_FROM_FILE), then "
                        "changeDynamics(uid, -1, **dynamics); positions are link frames (not centres of mass)",
         "gravity": [0.0, 0.0, -GRAVITY],
@@ -367,11 +369,24 @@ def export_urdf(scene: "Scene", proxies: dict[str, "Proxy"], out_dir: str | Path
                    "orientation_xyzw": [0.0, 0.0, 0.0, 1.0], "fixed": True},
         "objects": objects,
     }
+    if scene.structure:
+        index["structure"] = [_plane_entry(q) for q in scene.structure]
     if support_graph:
         index["support_graph"] = support_graph
     path = out_dir / FILES["urdf_index"]
     write_json(path, index)
     return path
+
+
+def _plane_entry(plane) -> dict:
+    """Index entry of a wall or ceiling (:class:`phiscene.scene.Plane`): the ground slab's URDF (top face at its
+    link's ``z = 0``) posed so that its top face is the plane, its +z the plane's normal."""
+    from phiscene.levelling import rotation_between
+
+    n = np.asarray(plane.normal, dtype=float)
+    return {"id": plane.id, "kind": plane.kind, "estimated": bool(plane.estimated), "urdf": "urdf/ground.urdf",
+            "position": (-float(plane.offset) * n).tolist(),
+            "orientation_xyzw": matrix_to_quat_xyzw(rotation_between([0.0, 0.0, 1.0], n)).tolist(), "fixed": True}
 
 
 def read_urdf_index(path: str | Path) -> dict:
@@ -402,7 +417,7 @@ def load_urdf_scene(index_path: str | Path, client) -> dict[str, int]:
 
     Returns
     -------
-    ``{id: body unique id}``, the ground under ``"ground"``.
+    ``{id: body unique id}``, the ground under ``"ground"``, each wall or ceiling under its plane id.
     """
     from phiscene.sim.bullet import configure_engine
 
@@ -414,6 +429,9 @@ def load_urdf_scene(index_path: str | Path, client) -> dict[str, int]:
     g = index["ground"]
     uids = {"ground": client.loadURDF(str(root / g["urdf"]), g["position"], g["orientation_xyzw"],
                                       useFixedBase=True)}
+    for q in index.get("structure", []):  # walls and ceiling: the ground slab, posed
+        uids[q["id"]] = client.loadURDF(str(root / q["urdf"]), q["position"], q["orientation_xyzw"],
+                                        useFixedBase=True)
     dyn = index["dynamics"]
     for i, o in enumerate(index["objects"]):
         try:
@@ -638,7 +656,8 @@ def release_urdf(index_path: str | Path, seconds: float, upward_offset: float = 
     client = open_client()
     try:
         uids = load_urdf_scene(index_path, client)
-        bodies = {k: v for k, v in uids.items() if k != "ground"}
+        fixed = {"ground", *(q["id"] for q in read_urdf_index(index_path).get("structure", []))}
+        bodies = {k: v for k, v in uids.items() if k not in fixed}
         time_step = read_urdf_index(index_path)["physics"]["time_step"]
 
         def poses() -> dict[str, np.ndarray]:
