@@ -284,3 +284,28 @@ def test_a_plank_leaning_on_a_wall_stays_in_the_exported_urdf_and_mjcf(tmp_path,
     else:
         drift = ex.release_mjcf(ex.export_mjcf(scene, proxies, tmp_path / "scene.xml", sim), 2.0)["drift_trans"]
     assert drift < 5e-3 if wall else drift > 0.05
+
+
+def test_roundtrip_of_a_scene_with_a_wall_an_attached_poster_and_a_leaning_plank(tmp_path):
+    # a poster fixed to the wall x = 0 (static in every export, not released), and the ladder leaning on that wall:
+    # every export releases the plank as the pipeline does (the check names no missing object and passes)
+    from scenes import leaning_pose
+
+    from phiscene.scene import Plane
+
+    size = (0.6, 0.08, 0.02)
+    plank = SceneObject("plank", save_mesh(trimesh.creation.box(size), tmp_path / "plank.obj"),
+                        leaning_pose(size, 60.0), "wooden plank")
+    poster = SceneObject("poster", save_mesh(trimesh.creation.box((0.01, 0.6, 0.8)), tmp_path / "poster.obj"),
+                         make_pose(translation=(0.005, 0.8, 1.5)), "poster on the wall", attached="wall_0")
+    scene = Scene([plank, poster], structure=[Plane("wall_0", "wall", (1.0, 0.0, 0.0), 0.0)])
+    proxies = {o.id: proxy_for_mesh(o.mesh_path, ProxyParams(backend="convex"), tmp_path / "cache")
+               for o in scene.objects}
+    ex.export_scene(scene, proxies, tmp_path / "out", SIM)
+    check = ex.roundtrip_check(tmp_path / "out", scene, proxies, PhysicalParams(), SIM, tmp_path / "cache")
+    for engine in ("pybullet", "mujoco", "usd"):
+        assert check[engine]["missing"] == [] and set(check[engine]["pipeline"]["objects"]) == {"plank"}
+        assert check[engine]["export"]["objects"]["plank"]["drift_trans"] < 5e-3, engine
+    assert check["ok"], {e: (check[e]["max_diff_trans"], check[e]["max_diff_rot"]) for e in ("pybullet", "mujoco")}
+    index = json.loads((tmp_path / "out" / "scene_urdf.json").read_text())
+    assert {o["id"]: o["fixed"] for o in index["objects"]} == {"plank": False, "poster": True}
