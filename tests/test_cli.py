@@ -144,3 +144,16 @@ def test_bench_command_deep_merges_a_suites_benchmark_override():
         assert "'nope'" in str(exc) and "corners" in str(exc)
     else:
         raise AssertionError("an unknown suite was accepted")
+
+
+def test_import_rest3d_estimates_walls_unless_told_not_to(tmp_path):
+    # the REST3D-layout fixture has a poster on its back wall: one wall, none with --no-walls
+    from rest3d_fixture import write_scene
+
+    write_scene(tmp_path / "data", "scene_a")
+    for flags, walls in (((), 1), (("--no-walls",), 0)):
+        out = tmp_path / f"out{walls}"
+        res = phiscene("import-rest3d", str(tmp_path / "data"), "scene_a", str(out), *flags, cwd=tmp_path)
+        assert res.returncode == 0, res.stderr
+        assert f"{walls} walls estimated" in res.stdout
+        assert len(load_scene(out / "initial" / "scene.json").structure) == walls

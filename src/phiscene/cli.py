@@ -6,7 +6,8 @@
     phiscene failures [RESULTS_DIR] [--why]
     phiscene import-sam3d IN_DIR OUT_DIR [--floor NX NY NZ D] [--unit-scale 1]
     phiscene import-placed MESH_DIR OUT_DIR [--up y|z] [--placements P.json] [--unit-scale 1] [--no-level]
-    phiscene import-rest3d ROOT SCENE OUT_DIR [--variant sam3d|ours] [--no-level]
+                           [--no-walls]
+    phiscene import-rest3d ROOT SCENE OUT_DIR [--variant sam3d|ours] [--no-level] [--no-walls]
     phiscene import-front3d ROOT OUT_DIR [--room SCENE_ID ...] [--test-rooms 1000] [--initial PATTERN]
     phiscene export SCENE_JSON OUT_DIR [--proxies P.npz] [--topology T.json] [--no-check] [--demo]
 
@@ -220,14 +221,16 @@ def cmd_import_sam3d(args: argparse.Namespace) -> None:
 def _report_import(scene, out_dir: str) -> None:
     lev = scene.meta.get("levelling", {})
     print(f"wrote {Path(out_dir) / 'initial' / 'scene.json'} ({len(scene)} objects, levelled by "
-          f"{lev.get('rotation_deg', 0.0):.2f} deg; {Path(out_dir) / 'import.json'} has the transform)")
+          f"{lev.get('rotation_deg', 0.0):.2f} deg, {len(scene.structure)} walls estimated; "
+          f"{Path(out_dir) / 'import.json'} has the transform and the walls' evidence)")
 
 
 def cmd_import_placed(args: argparse.Namespace) -> None:
     from phiscene.io.placed import PlacedParams, import_placed, read_placed_dir
 
     try:
-        params = PlacedParams.from_dict({"up": args.up, "unit_scale": args.unit_scale, "level": not args.no_level})
+        params = PlacedParams.from_dict({"up": args.up, "unit_scale": args.unit_scale, "level": not args.no_level,
+                                         "walls": {"enabled": not args.no_walls}})
     except ValueError as exc:
         raise PhisceneError(f"--unit-scale: {exc}") from None
     objects = read_placed_dir(args.mesh_dir, args.placements)
@@ -239,7 +242,8 @@ def cmd_import_rest3d(args: argparse.Namespace) -> None:
     from phiscene.io.placed import PlacedParams
     from phiscene.io.rest3d import import_rest3d
 
-    scene = import_rest3d(args.root, args.scene, args.out_dir, args.variant, PlacedParams(level=not args.no_level))
+    params = PlacedParams.from_dict({"level": not args.no_level, "walls": {"enabled": not args.no_walls}})
+    scene = import_rest3d(args.root, args.scene, args.out_dir, args.variant, params)
     _report_import(scene, args.out_dir)
 
 
@@ -315,6 +319,7 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--unit-scale", type=float, default=1.0,
                     help="metres per source unit (default 1; 0.001 for millimetres, 0.01 for centimetres)")
     pl.add_argument("--no-level", action="store_true", help="trust the up convention (no gravity estimate)")
+    pl.add_argument("--no-walls", action="store_true", help="estimate no walls from the panels hanging on them")
     pl.set_defaults(func=cmd_import_placed)
 
     r3 = sub.add_parser("import-rest3d", help="import one scene of the REST3D page assets (README: Real scenes)")
@@ -323,6 +328,7 @@ def build_parser() -> argparse.ArgumentParser:
     r3.add_argument("out_dir")
     r3.add_argument("--variant", choices=("sam3d", "ours"), default="sam3d")
     r3.add_argument("--no-level", action="store_true", help="trust the up convention (no gravity estimate)")
+    r3.add_argument("--no-walls", action="store_true", help="estimate no walls from the panels hanging on them")
     r3.set_defaults(func=cmd_import_rest3d)
 
     f3 = sub.add_parser("import-front3d", help="import 3D-FRONT test rooms (MIDI-3D layout) as benchmark scenes")
