@@ -97,15 +97,14 @@ def main(argv: list[str] | None = None) -> None:
     scenes = [d for d in scenes if load_scene(d / "initial" / "scene.json", check_meshes=False).structure]
     if not scenes:
         raise SystemExit(f"no built scenes with given walls under {results / 'scenes' / args.suite}")
-    rows = []
     print(f"{'scene':12s} {'walls':>5s}  estimated -> given (angle deg, offset m)")
-    for d in scenes:
-        found = compare(d)
-        rows += found
-        print(f"{d.name:12s} {len(found):5d}  " + "; ".join(f"{g} {a:.1f} {o:+.3f}" for g, a, o in found))
+    found = {d.name: compare(d) for d in scenes}
+    for name, walls in found.items():
+        print(f"{name:12s} {len(walls):5d}  " + "; ".join(f"{g} {a:.1f} {o:+.3f}" for g, a, o in walls))
+    rows = [r for walls in found.values() for r in walls]
     if rows:
         a, o = np.array([r[1] for r in rows]), np.array([r[2] for r in rows])
-        print(f"{len(rows)} walls in {sum(bool(compare(d)) for d in scenes)} of {len(scenes)} scenes; angle "
+        print(f"{len(rows)} walls in {sum(map(bool, found.values()))} of {len(scenes)} scenes; angle "
               f"{a.min():.1f}-{a.max():.1f} (median {np.median(a):.1f}) deg; offset {o.min():+.3f} to {o.max():+.3f} "
               f"(median {np.median(o):+.3f}) m")
     if not args.ground:

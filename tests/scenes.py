@@ -99,3 +99,24 @@ def leaning_pose(size, angle_deg: float) -> np.ndarray:
     R = np.column_stack([u, [0.0, 1.0, 0.0], np.cross(u, [0.0, 1.0, 0.0])])
     v = trimesh.creation.box(size).vertices @ R.T
     return make_pose(R, (-v[:, 0].min(), 0.0, -v[:, 2].min()))
+
+
+#: The ladder's plank (m): see :func:`ladder_on_wall`.
+PLANK = (0.6, 0.08, 0.02)
+
+
+def ladder_on_wall(tmp_path: Path, turn_deg: float = 0.0, wall: bool = True,
+                   estimated: bool = True) -> tuple[Scene, dict]:
+    """The ladder of tests/test_clutter.py (a plank at 60 deg against the wall x = 0: statics hold it when
+    mu_ground >= tan 30 deg / 2 = 0.29), the whole turned ``turn_deg`` about z, with the wall ``wall_0`` (or
+    none), and the convex proxies."""
+    from phiscene.scene import Plane
+    from phiscene.transforms import rotation_z
+
+    turn = make_pose(rotation_z(np.radians(turn_deg)))
+    plank = SceneObject("plank", save_mesh(trimesh.creation.box(PLANK), tmp_path / "plank.obj").resolve(),
+                        turn @ leaning_pose(PLANK, 60.0), "wooden plank")
+    normal = tuple(float(v) for v in turn[:3, :3] @ [1.0, 0.0, 0.0])
+    planes = [Plane("wall_0", "wall", normal, 0.0, estimated=estimated)] if wall else []
+    scene = Scene([plank], structure=planes)
+    return scene, {"plank": proxy_for_mesh(plank.mesh_path, ProxyParams(backend="convex"), tmp_path / "cache")}

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import trimesh
-from scenes import leaning_pose
+from scenes import PLANK, leaning_pose
 
 from phiscene.bench import clutter
 from phiscene.bench.build import build_scene
@@ -28,7 +28,6 @@ from phiscene.transforms import make_pose
 
 SIM = SimSettings()
 WALL = Plane("wall_0", "wall", (1.0, 0.0, 0.0), 0.0)  # the plane x = 0, room at x > 0
-PLANK = (0.6, 0.08, 0.02)
 
 
 @pytest.fixture(scope="module")

@@ -265,19 +265,11 @@ def test_cli_export(bridge, tmp_path, capsys):
 @pytest.mark.parametrize("fmt", ["urdf", "mjcf"])
 @pytest.mark.parametrize("wall", [True, False])
 def test_a_plank_leaning_on_a_wall_stays_in_the_exported_urdf_and_mjcf(tmp_path, fmt, wall):
-    # the ladder of tests/test_clutter.py (statics: mu >= tan 30 deg / 2) on the wall x = 0 turned 20 deg about z:
-    # each export carries the wall, and released for 2 s the plank stays; exported without it, it falls
-    from scenes import leaning_pose
+    # the ladder (tests/scenes.py) on the wall x = 0 turned 20 deg about z: each export carries the wall, and
+    # released for 2 s the plank stays; exported without it, it falls
+    from scenes import ladder_on_wall
 
-    from phiscene.scene import Plane
-
-    size = (0.6, 0.08, 0.02)
-    turn = make_pose(rotation_z(np.radians(20.0)))
-    normal = tuple(float(v) for v in turn[:3, :3] @ [1.0, 0.0, 0.0])
-    plank = SceneObject("plank", save_mesh(trimesh.creation.box(size), tmp_path / "plank.obj"),
-                        turn @ leaning_pose(size, 60.0), "wooden plank")
-    scene = Scene([plank], structure=[Plane("wall_0", "wall", normal, 0.0, estimated=True)] if wall else [])
-    proxies = {"plank": proxy_for_mesh(plank.mesh_path, ProxyParams(backend="convex"), tmp_path / "cache")}
+    scene, proxies = ladder_on_wall(tmp_path, 20.0, wall)
     sim = SimSettings()
     if fmt == "urdf":
         drift = ex.release_urdf(ex.export_urdf(scene, proxies, tmp_path / "out", sim), 2.0)["drift_trans"]
@@ -289,18 +281,13 @@ def test_a_plank_leaning_on_a_wall_stays_in_the_exported_urdf_and_mjcf(tmp_path,
 def test_roundtrip_of_a_scene_with_a_wall_an_attached_poster_and_a_leaning_plank(tmp_path):
     # a poster fixed to the wall x = 0 (static in every export, not released), and the ladder leaning on that wall:
     # every export releases the plank as the pipeline does (the check names no missing object and passes)
-    from scenes import leaning_pose
+    from scenes import ladder_on_wall
 
-    from phiscene.scene import Plane
-
-    size = (0.6, 0.08, 0.02)
-    plank = SceneObject("plank", save_mesh(trimesh.creation.box(size), tmp_path / "plank.obj"),
-                        leaning_pose(size, 60.0), "wooden plank")
+    ladder, proxies = ladder_on_wall(tmp_path, estimated=False)
     poster = SceneObject("poster", save_mesh(trimesh.creation.box((0.01, 0.6, 0.8)), tmp_path / "poster.obj"),
                          make_pose(translation=(0.005, 0.8, 1.5)), "poster on the wall", attached="wall_0")
-    scene = Scene([plank, poster], structure=[Plane("wall_0", "wall", (1.0, 0.0, 0.0), 0.0)])
-    proxies = {o.id: proxy_for_mesh(o.mesh_path, ProxyParams(backend="convex"), tmp_path / "cache")
-               for o in scene.objects}
+    scene = Scene([*ladder.objects, poster], structure=ladder.structure)
+    proxies["poster"] = proxy_for_mesh(poster.mesh_path, ProxyParams(backend="convex"), tmp_path / "cache")
     ex.export_scene(scene, proxies, tmp_path / "out", SIM)
     check = ex.roundtrip_check(tmp_path / "out", scene, proxies, PhysicalParams(), SIM, tmp_path / "cache")
     for engine in ("pybullet", "mujoco", "usd"):

@@ -125,22 +125,12 @@ def test_validators_catch_a_broken_stage(tmp_path, exported):
 
 @pytest.mark.parametrize("wall", [True, False])
 def test_a_plank_leaning_on_a_wall_stays_in_the_exported_stage(tmp_path, wall):
-    # the ladder of tests/test_clutter.py (statics: mu >= tan 30 deg / 2) on an estimated wall, x = 0 turned 20 deg
-    # about z: the stage holds the wall as a static plane, read back as written, and the plank stays; exported
-    # without it, it falls
-    from scenes import leaning_pose
+    # the ladder (tests/scenes.py) on an estimated wall, x = 0 turned 20 deg about z: the stage holds the wall as a
+    # static plane, read back as written, and the plank stays; exported without it, it falls
+    from scenes import ladder_on_wall
 
-    from phiscene.proxies import proxy_for_mesh
-    from phiscene.scene import Plane
-
-    size = (0.6, 0.08, 0.02)
-    turn = make_pose(rotation_z(np.radians(20.0)))
-    normal = tuple(float(v) for v in turn[:3, :3] @ [1.0, 0.0, 0.0])
-    plank = SceneObject("plank", save_mesh(trimesh.creation.box(size), tmp_path / "plank.obj"),
-                        turn @ leaning_pose(size, 60.0), "wooden plank")
-    planes = [Plane("wall_0", "wall", normal, 0.0, estimated=True)] if wall else []
-    scene = Scene([plank], structure=planes)
-    proxies = {"plank": proxy_for_mesh(plank.mesh_path, ProxyParams(backend="convex"), tmp_path / "cache")}
+    scene, proxies = ladder_on_wall(tmp_path, 20.0, wall)
+    planes = scene.structure
     path = export_usd(scene, proxies, tmp_path / "scene.usda", SIM)
     read = read_usd_scene(path)
     assert len(read["structure"]) == len(planes)

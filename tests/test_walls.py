@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import trimesh
 from rest3d_fixture import write_scene
-from scenes import convex_proxies, leaning_pose
+from scenes import PLANK, convex_proxies, leaning_pose
 
 from phiscene.assembly import AssemblyParams, ground_scene
 from phiscene.io.rest3d import import_rest3d
@@ -20,8 +20,6 @@ from phiscene.sim.settings import SimSettings
 from phiscene.topology.attached import attached_ids
 from phiscene.transforms import make_pose
 from phiscene.walls import WallParams, estimate_walls
-
-PLANK = (0.6, 0.08, 0.02)
 
 
 def heading(deg: float) -> np.ndarray:

@@ -122,6 +122,17 @@ class Plane:
         """Signed distances (n,) of points (n, 3) from the plane, positive on the room side."""
         return np.asarray(points, dtype=float) @ np.asarray(self.normal, dtype=float) + self.offset
 
+    def frame(self) -> np.ndarray:
+        """A frame (4, 4) of the plane: its +z axis the normal, its origin the plane's point nearest the world
+        origin (how the exports pose a wall: a ground plane or slab whose top face is the plane)."""
+        from phiscene.levelling import rotation_between
+
+        n = np.asarray(self.normal, dtype=float)
+        out = np.eye(4)
+        out[:3, :3] = rotation_between([0.0, 0.0, 1.0], n)
+        out[:3, 3] = -float(self.offset) * n
+        return out
+
     def to_dict(self) -> dict:
         """JSON form (``structure`` entry of ``scene.json``)."""
         out = {"id": self.id, "kind": self.kind, "normal": [float(v) for v in self.normal],

@@ -167,8 +167,8 @@ def estimate_walls(scene: Scene, params: WallParams = WallParams(), eye: np.ndar
         why = "disabled" if not params.enabled else "the scene gives its structure"
         return WallEstimate([], {"walls": [], "rejected": [], "skipped": why})
     attached = attached or AttachedParams()
-    decided = attached_objects(scene, attached)
     world = {o.id: o.world_mesh() for o in scene.objects}
+    decided = attached_objects(scene, attached, world)
     free = [oid for oid in scene.ids if oid not in decided]
     centres = [world[o].bounds.mean(axis=0) for o in (free or scene.ids)]
     ref = np.asarray(eye, dtype=float) if eye is not None else np.mean(centres, axis=0)

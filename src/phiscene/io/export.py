@@ -381,13 +381,11 @@ def export_urdf(scene: "Scene", proxies: dict[str, "Proxy"], out_dir: str | Path
 
 def _plane_entry(plane) -> dict:
     """Index entry of a wall or ceiling (:class:`phiscene.scene.Plane`): the ground slab's URDF (top face at its
-    link's ``z = 0``) posed so that its top face is the plane, its +z the plane's normal."""
-    from phiscene.levelling import rotation_between
-
-    n = np.asarray(plane.normal, dtype=float)
+    link's ``z = 0``) posed so that its top face is the plane (:meth:`phiscene.scene.Plane.frame`)."""
+    frame = plane.frame()
     return {"id": plane.id, "kind": plane.kind, "estimated": bool(plane.estimated), "urdf": "urdf/ground.urdf",
-            "position": (-float(plane.offset) * n).tolist(),
-            "orientation_xyzw": matrix_to_quat_xyzw(rotation_between([0.0, 0.0, 1.0], n)).tolist(), "fixed": True}
+            "position": frame[:3, 3].tolist(), "orientation_xyzw": matrix_to_quat_xyzw(frame[:3, :3]).tolist(),
+            "fixed": True}
 
 
 def read_urdf_index(path: str | Path) -> dict:

@@ -151,12 +151,8 @@ def export_usd(scene: "Scene", proxies: dict[str, "Proxy"], path: str | Path, si
     UsdGeom.Scope.Define(stage, "/World/Looks")
     mat = _physics_material(stage, sim)
 
-    ground = UsdGeom.Plane.Define(stage, GROUND_PRIM)
-    ground.CreateAxisAttr(UsdGeom.Tokens.z)
-    ground.CreateWidthAttr(2 * GROUND_EXTENT)
-    ground.CreateLengthAttr(2 * GROUND_EXTENT)
+    ground = _plane_prim(stage, GROUND_PRIM, mat)
     ground.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, float(scene.ground_height)))
-    _collider(ground.GetPrim(), mat, approximation=None)
     if scene.structure:
         _structure(stage, scene.structure, mat)
 
@@ -215,29 +211,35 @@ def export_usd(scene: "Scene", proxies: dict[str, "Proxy"], path: str | Path, si
     return path
 
 
-def _structure(stage, planes, mat) -> None:
-    """Walls and ceiling (:class:`phiscene.scene.Plane`) as static UsdGeom.Plane colliders under :data:`STRUCTURE`:
-    each prim's local +z axis is the plane's normal and its origin the plane's point nearest the world origin."""
-    from pxr import Gf, UsdGeom
+def _plane_prim(stage, path: str, mat):
+    """A static UsdGeom.Plane collider (axis Z, :data:`GROUND_EXTENT` each way) at ``path``; the caller poses it."""
+    from pxr import UsdGeom
 
-    from phiscene.levelling import rotation_between
+    geom = UsdGeom.Plane.Define(stage, path)
+    geom.CreateAxisAttr(UsdGeom.Tokens.z)
+    geom.CreateWidthAttr(2 * GROUND_EXTENT)
+    geom.CreateLengthAttr(2 * GROUND_EXTENT)
+    _collider(geom.GetPrim(), mat, approximation=None)
+    return geom
+
+
+def _structure(stage, planes, mat) -> None:
+    """Walls and ceiling (:class:`phiscene.scene.Plane`) as static UsdGeom.Plane colliders under :data:`STRUCTURE`,
+    each posed at its plane's :meth:`~phiscene.scene.Plane.frame` (local +z the normal)."""
+    from pxr import Gf, UsdGeom
 
     UsdGeom.Scope.Define(stage, STRUCTURE)
     for plane in planes:
-        n = np.asarray(plane.normal, dtype=float)
-        geom = UsdGeom.Plane.Define(stage, f"{STRUCTURE}/{_prim_name(plane.id)}")
-        geom.CreateAxisAttr(UsdGeom.Tokens.z)
-        geom.CreateWidthAttr(2 * GROUND_EXTENT)
-        geom.CreateLengthAttr(2 * GROUND_EXTENT)
-        geom.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, -float(plane.offset) * n)))
-        w, x, y, z = matrix_to_quat_wxyz(rotation_between([0.0, 0.0, 1.0], n))
+        frame = plane.frame()
+        geom = _plane_prim(stage, f"{STRUCTURE}/{_prim_name(plane.id)}", mat)
+        geom.AddTranslateOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Vec3d(*map(float, frame[:3, 3])))
+        w, x, y, z = matrix_to_quat_wxyz(frame[:3, :3])
         geom.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(Gf.Quatd(float(w), Gf.Vec3d(float(x), float(y),
                                                                                          float(z))))
         prim = geom.GetPrim()
         prim.SetCustomDataByKey("phiscene:id", plane.id)
         prim.SetCustomDataByKey("phiscene:kind", plane.kind)
         prim.SetCustomDataByKey("phiscene:estimated", bool(plane.estimated))
-        _collider(prim, mat, approximation=None)
 
 
 def _read_structure(stage, time) -> list:

@@ -181,16 +181,17 @@ def is_fragment(description: str, bottom: float, top: float, ground: float, para
     return (high or (gap >= params.partial_gap and says_partial(description))) and names_furniture(description)
 
 
-def attached_objects(scene, params: AttachedParams = AttachedParams()) -> dict[str, str]:
+def attached_objects(scene, params: AttachedParams = AttachedParams(), world: dict | None = None) -> dict[str, str]:
     """Objects decided attached (module docstring) -> why (``fixture``, ``description``, ``partial``, ``panel`` or
     ``ceiling``).
 
     Objects already marked :attr:`~phiscene.scene.SceneObject.attached` in the scene are kept (reason ``given``).
+    ``world``: the objects' world meshes by id when the caller has them (else they are built here).
     """
     out = {o.id: "given" for o in scene.objects if o.attached is not None}
     if not params.enabled:
         return out
-    world = {o.id: o.world_mesh() for o in scene.objects}
+    world = world if world is not None else {o.id: o.world_mesh() for o in scene.objects}
     ground = float(scene.ground_height)
     top = max(float(m.bounds[1, 2]) for m in world.values())
     room = top - ground >= params.room_height

@@ -606,15 +606,20 @@ def described_leaning(a: Body, planes, tol: float, params: GeometricParams) -> l
     lo, hi = float(a.bounds[0, 2]), float(a.bounds[1, 2])
     edges = []
     for plane in planes:
-        if plane.kind != "wall":
-            continue
-        gap = plane.signed_distance(a.points)
-        near = (gap <= tol) & (gap >= -params.penetration_scale * tol) & (a.points[:, 2] > lo + 0.25 * (hi - lo))
-        if int(near.sum()) >= params.min_contact_points:
-            edges.append(SupportEdge(plane.id, a.id, "leans_on", _confidence(gap[near], 1.0, tol),
-                                     f"its description says it leans against a wall; {int(near.sum())} samples "
+        gaps = _against(a, plane, lo + 0.25 * (hi - lo), tol, params) if plane.kind == "wall" else ()
+        if len(gaps):
+            edges.append(SupportEdge(plane.id, a.id, "leans_on", _confidence(gaps, 1.0, tol),
+                                     f"its description says it leans against a wall; {len(gaps)} samples "
                                      f"against {plane.id}"))
     return edges
+
+
+def _against(a: Body, plane, above: float, tol: float, params: GeometricParams) -> np.ndarray:
+    """The gaps (m) to ``plane`` of A's samples higher than ``above`` (z, m) that lie within
+    ``[-penetration_scale * tol, tol]`` of it; empty when there are fewer than ``min_contact_points``."""
+    gap = plane.signed_distance(a.points)
+    near = (gap <= tol) & (gap >= -params.penetration_scale * tol) & (a.points[:, 2] > above)
+    return gap[near] if int(near.sum()) >= params.min_contact_points else gap[:0]
 
 
 def _tip_partner(a: Body, tip, supporters: list[str], ancestors: dict[str, set[str]], bodies: dict[str, Body],
@@ -645,13 +650,12 @@ def wall_leaning(a: Body, planes, direction: np.ndarray, support_z: float, tol: 
     edges = []
     for plane in planes:
         n = np.asarray(plane.normal, dtype=float)
-        gap = plane.signed_distance(a.points)
-        near = (gap <= tol) & (gap >= -params.penetration_scale * tol) & (a.points[:, 2] > support_z)
-        if int(near.sum()) < params.min_contact_points or float(n[:2] @ direction) >= 0:
+        gaps = _against(a, plane, support_z, tol, params) if float(n[:2] @ direction) < 0 else ()
+        if not len(gaps):
             continue
-        conf = _confidence(gap[near], float(np.linalg.norm(n[:2])), tol)
+        conf = _confidence(gaps, float(np.linalg.norm(n[:2])), tol)
         edges.append(SupportEdge(plane.id, a.id, "leans_on", conf,
-                                 f"{int(near.sum())} samples against {plane.id} hold the centre of mass, "
+                                 f"{len(gaps)} samples against {plane.id} hold the centre of mass, "
                                  f"{100 * dist:.1f} cm outside the support below"))
     return edges
 

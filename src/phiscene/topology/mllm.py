@@ -4,9 +4,10 @@ Supporting Topology Inference").
 Inputs sent: the reference image, the instance segmentation and a JSON list of per-object metadata
 (:func:`object_metadata`: id, description, instance RGB colour, world AABB, OBB, top-down footprint), with
 the paper's system prompt (:data:`SYSTEM_PROMPT`) and user prompt (:func:`user_prompt`, ending in the
-object list). A scene with walls (its ``structure``: given, or estimated by :mod:`phiscene.walls`) also lists them in
-the metadata (``walls``: name, normal, offset) and the prompt names them as supporters of what leans on them
-(relation ``leans_on``); a scene without walls gets the paper's prompt unchanged. The images are found as ``params.image`` / ``params.segmentation``, else next to the
+object list). A scene with walls (its ``structure``: given, or estimated by :mod:`phiscene.walls`) also lists
+them in the metadata (``walls``: name, normal, offset) and the prompt names them as supporters of what leans on
+them (relation ``leans_on``); a scene without walls gets the paper's prompt unchanged. The images are found as
+``params.image`` / ``params.segmentation``, else next to the
 scene's camera file, else in ``../reference/`` of the scene file (the benchmark layout).
 
 Providers (optional extra ``mllm``: ``pip install 'phiscene[mllm]'``, imported lazily):
