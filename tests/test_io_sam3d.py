@@ -218,3 +218,64 @@ def test_cli_import_then_ground_end_to_end(tmp_path):
         np.testing.assert_allclose((lo[:2] + hi[:2]) / 2, xy, atol=0.01)  # where the image put it
     res = run("import-sam3d", str(tmp_path / "nowhere"), str(tmp_path / "x"))
     assert res.returncode == 1 and res.stderr.count("\n") == 1 and "nowhere: input folder not found" in res.stderr
+
+
+def _table_top_photo(root):
+    """A table-top photo as SAM 3D Objects outputs it (no floor.json): a table whose back legs the image cut off
+    (reconstructed 0.3 m long of 0.71), a plate and two fruit on it, a poster on the wall behind, the camera 1.4 m
+    up, pitched 35 deg down and rolled 4 deg. Returns the world -> PyTorch3D transform."""
+    at = trimesh.transformations.translation_matrix
+    parts = [trimesh.creation.box((1.2, 0.8, 0.04), at((0, 2.0, 0.73)))]
+    for x in (-0.55, 0.55):
+        for y, length in ((1.65, 0.71), (2.35, 0.30)):  # front legs to the floor, back legs cut off
+            parts.append(trimesh.creation.box((0.05, 0.05, length), at((x, y, 0.71 - length / 2))))
+    objs = [("table", trimesh.util.concatenate(parts), "a wooden table"),
+            ("plate", trimesh.creation.cylinder(0.12, 0.02, sections=48, transform=at((0.2, 1.9, 0.76))),
+             "a white plate"),
+            ("pear", trimesh.creation.icosphere(2, 0.04).apply_translation((-0.2, 2.1, 0.79)), "a green pear"),
+            ("apple", trimesh.creation.icosphere(2, 0.035).apply_translation((0.2, 1.9, 0.805)), "an apple"),
+            ("poster", trimesh.creation.box((0.6, 0.01, 0.8), at((0.0, 2.995, 1.6))), "a poster on the wall")]
+    scene_objs = []
+    for name, mesh, text in objs:
+        centre = mesh.bounds.mean(axis=0)
+        path = save_mesh(mesh.copy().apply_translation(-centre), root / "src" / f"{name}.glb")
+        scene_objs.append(SceneObject(name, path, at(centre), text))
+    # camera: at (0, 0, 1.4), yawed 0, pitched 35 deg down, rolled 4 deg; PyTorch3D X = -right, Y = up, Z = forward
+    look = Rotation.from_euler("XY", [-35, 4], degrees=True).as_matrix()
+    right, fwd = look[:, 0], look[:, 1]
+    c2w = np.eye(4)
+    c2w[:3, :3] = np.stack([-right, np.cross(right, fwd), fwd], axis=1)
+    c2w[:3, 3] = [0.0, 0.0, 1.4]
+    w2c = np.linalg.inv(c2w)
+    export_sam3d(Scene(scene_objs), root / "sam3d", w2c, variant="glb", write_floor=False)
+    return w2c
+
+
+def test_table_top_photo_is_levelled_by_its_table_not_by_its_lowest_facet(tmp_path):
+    """No floor given: the floor is normal to the levelled up (table top and plate), at the feet of what stands on
+    it, within 1 deg and 1 cm of the analytic floor, though the camera is pitched 35 deg and rolled 4 and the back
+    legs end 0.41 m above it; the wall behind the poster is estimated, and not when told not to."""
+    from phiscene.io.sam3d import Sam3dParams
+    from phiscene.walls import WallParams
+
+    w2c = _table_top_photo(tmp_path)
+    true_up = w2c[:3, :3] @ [0.0, 0.0, 1.0]  # world +z in camera coordinates
+    scene = import_sam3d(tmp_path / "sam3d", tmp_path / "out")
+    rec = json.loads((tmp_path / "out/import.json").read_text())
+    assert rec["floor"]["from"] == "estimated" and rec["up_estimate"]["tilt_deg"] > 30
+    floor_normal = np.asarray(rec["floor"]["normal"])
+    assert np.degrees(np.arccos(np.clip(floor_normal @ true_up, -1, 1))) < 1.0
+    # the front legs stand on the floor: their feet at z = 0 (they are the table's lowest points), the camera 1.4 m up
+    assert abs(scene.get("table").world_mesh().bounds[0, 2]) < 0.01
+    np.testing.assert_allclose(rec["camera_height"], 1.4, atol=0.01)
+    top = scene.get("plate").world_mesh().bounds[1, 2] - scene.get("plate").world_mesh().bounds[0, 2]
+    np.testing.assert_allclose(top, 0.02, atol=1e-3)  # level: the plate's thickness is its height
+    walls = [p for p in scene.structure if p.kind == "wall"]
+    assert len(walls) == 1 and walls[0].estimated
+    poster = scene.get("poster").world_mesh()
+    back = poster.vertices[np.argmax(-poster.vertices @ np.asarray(walls[0].normal))]
+    assert abs(float(np.asarray(walls[0].normal) @ back + walls[0].offset)) < 0.01  # through the poster's back
+    assert np.degrees(np.arccos(abs(np.asarray(walls[0].normal)[2]))) > 89.0  # vertical
+    # told not to, it estimates none
+    bare = import_sam3d(tmp_path / "sam3d", tmp_path / "bare", params=Sam3dParams(walls=WallParams(enabled=False)))
+    assert not bare.structure

@@ -4,7 +4,7 @@
     phiscene metrics SCENE_JSON [--suite real] [--config ...]
     phiscene bench OUT_DIR [--suite contact] [--index 0] [--config ...]
     phiscene failures [RESULTS_DIR] [--why]
-    phiscene import-sam3d IN_DIR OUT_DIR [--floor NX NY NZ D] [--unit-scale 1]
+    phiscene import-sam3d IN_DIR OUT_DIR [--floor NX NY NZ D] [--unit-scale 1] [--no-walls]
     phiscene import-placed MESH_DIR OUT_DIR [--up y|z] [--placements P.json] [--unit-scale 1] [--no-level]
                            [--no-walls]
     phiscene import-rest3d ROOT SCENE OUT_DIR [--variant sam3d|ours] [--no-level] [--no-walls]
@@ -210,12 +210,14 @@ def cmd_import_sam3d(args: argparse.Namespace) -> None:
 
     floor = make_floor(args.floor[:3], args.floor[3], "--floor") if args.floor else None
     try:
-        params = Sam3dParams.from_dict({"unit_scale": args.unit_scale})
+        params = Sam3dParams.from_dict({"unit_scale": args.unit_scale, "walls": {"enabled": not args.no_walls}})
     except ValueError as exc:
         raise PhisceneError(f"--unit-scale: {exc}") from None
     scene = import_sam3d(args.in_dir, args.out_dir, floor, params)
     print(f"wrote {Path(args.out_dir) / 'initial' / 'scene.json'} ({len(scene)} objects, floor "
-          f"{scene.meta['floor']['from']})")
+          f"{scene.meta['floor']['from']}, {scene.meta['levelling']['rotation_deg']:.2f} deg from the camera's up, "
+          f"{len(scene.structure)} walls estimated; {Path(args.out_dir) / 'import.json'} has the floor, the up "
+          f"estimate and the walls' evidence)")
 
 
 def _report_import(scene, out_dir: str) -> None:
@@ -306,8 +308,9 @@ def build_parser() -> argparse.ArgumentParser:
     s3.add_argument("out_dir")
     s3.add_argument("--floor", nargs=4, type=float, metavar=("NX", "NY", "NZ", "D"),
                     help="floor plane n.p + d = 0 in the PyTorch3D camera frame (default: IN_DIR/floor.json, "
-                         "else estimated)")
+                         "else estimated: the levelling's up, the ground where the objects stand)")
     s3.add_argument("--unit-scale", type=float, default=1.0, help="multiply translations and scales (default 1)")
+    s3.add_argument("--no-walls", action="store_true", help="estimate no walls from the panels hanging on them")
     s3.set_defaults(func=cmd_import_sam3d)
 
     pl = sub.add_parser("import-placed", help="import per-object meshes placed in one frame, levelled "

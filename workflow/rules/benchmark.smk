@@ -42,7 +42,7 @@ rule front3d_scene:
         suite=alternation(source_suites("front3d")),
     params:
         source=suite_source,
-        version=V.BENCHMARK,
+        version=V.FRONT3D,
     log:
         "results/logs/benchmark/{suite}/{scene}.log",
     benchmark:
