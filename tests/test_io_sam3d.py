@@ -1,6 +1,9 @@
 """SAM 3D Objects importer: fixtures in SAM 3D's exact output format whose world result is known analytically."""
 
 import json
+import os
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -279,3 +282,56 @@ def test_table_top_photo_is_levelled_by_its_table_not_by_its_lowest_facet(tmp_pa
     # told not to, it estimates none
     bare = import_sam3d(tmp_path / "sam3d", tmp_path / "bare", params=Sam3dParams(walls=WallParams(enabled=False)))
     assert not bare.structure
+
+
+@pytest.mark.workflow
+def test_a_folder_of_runs_is_a_workflow_suite(tmp_path):
+    """`source: {kind: sam3d, root: ...}`: each run a scene, levelled with the poster's wall; a run with camera.json
+    also gives the photo's camera (and the faithful grounding reads it); the real-scenes table plans over the runs;
+    an unknown key of the source is refused by the config check, naming it."""
+    import subprocess
+    import sys
+
+    import yaml
+
+    from phiscene.scene import load_scene
+
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    w2c = _table_top_photo(tmp_path / "a")
+    (tmp_path / "a/sam3d").rename(runs / "tabletop")
+    (runs / "tabletop/camera.json").write_text(json.dumps({"fx": 50.0, "fy": 50.0, "cx": 31.5, "cy": 23.5,
+                                                           "width": 64, "height": 48}))
+    write_fixture(runs / "boxes", "glb")
+    (runs / "notes").mkdir()  # not a run: no <object id>/pose.json
+    cfg = {"suites": {"mine": {"source": {"kind": "sam3d", "root": str(runs)}}},
+           "tables": {"mine": {"kind": "real", "suite": "mine", "methods": ["initial", "phi_scene"]}}}
+    (tmp_path / "mine.yaml").write_text(yaml.safe_dump(cfg))
+    root = Path(__file__).resolve().parents[1]
+
+    def snakemake(*args):
+        return subprocess.run([sys.executable, "-m", "snakemake", "-s", str(root / "Snakefile"), "--directory",
+                               str(tmp_path / "wf"), *args, "--configfile", str(tmp_path / "mine.yaml")],
+                              capture_output=True, text=True, timeout=600, env={**os.environ, "PYTHONHASHSEED": "0"})
+
+    plan = snakemake("-n", "results/tables/mine.csv")
+    assert plan.returncode == 0, plan.stderr[-3000:]
+    for rule, scenes in (("sam3d_scene_mine_camera", 1), ("sam3d_scene_mine", 1)):
+        assert re.search(rf"^{rule}\s+{scenes}$", plan.stdout + plan.stderr, re.M), plan.stdout[-3000:]
+    # the camera of the run that gives one is an input of its faithful grounding
+    scenes = ["results/scenes/mine/tabletop/initial/scene.json", "results/scenes/mine/tabletop/reference/camera.json",
+              "results/scenes/mine/boxes/initial/scene.json"]
+    res = snakemake("-j2", *scenes)
+    assert res.returncode == 0, res.stderr[-3000:]
+    top = load_scene(tmp_path / "wf" / scenes[0])
+    walls = [p for p in top.structure if p.kind == "wall"]
+    assert len(walls) == 1 and abs(top.get("table").world_mesh().bounds[0, 2]) < 0.01
+    assert not (tmp_path / "wf/results/scenes/mine/boxes/reference/camera.json").exists()
+    assert sorted(load_scene(tmp_path / "wf" / scenes[2]).ids) == sorted(BOXES)
+    floor = json.loads((tmp_path / "wf/results/scenes/mine/tabletop/import.json").read_text())["floor"]
+    assert np.degrees(np.arccos(np.clip(np.asarray(floor["normal"]) @ w2c[:3, :3] @ [0.0, 0.0, 1.0], -1, 1))) < 1.0
+    cfg["suites"]["mine"]["source"]["params"] = {"unit_scael": 1.0}
+    (tmp_path / "mine.yaml").write_text(yaml.safe_dump(cfg))
+    bad = snakemake("-n", "results/tables/mine.csv")
+    said = bad.stdout + bad.stderr
+    assert bad.returncode != 0 and "suites.mine.source" in said and "unit_scael" in said, said[-2000:]

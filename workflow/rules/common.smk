@@ -17,6 +17,10 @@ def scene_ids(suite):
         from phiscene.io.rest3d import scene_ids as _rest3d_scene_ids
 
         return _rest3d_scene_ids(s["source"]["root"])
+    if "source" in s and s["source"]["kind"] == "sam3d":  # every run in the source's folder
+        from phiscene.io.sam3d import scene_ids as _sam3d_scene_ids
+
+        return _sam3d_scene_ids(s["source"]["root"])
     if "source" in s:  # 3D-FRONT test rooms (phiscene.io.front3d), from the source's room list file
         from phiscene.io.front3d import scene_ids as _front3d_scene_ids
 
@@ -41,7 +45,8 @@ def benchmark_suites():
 
 
 def source_suites(kind):
-    """Suites read from a real-data `source` of one kind (front3d: 3D-FRONT; rest3d: REST3D page assets)."""
+    """Suites read from a real-data `source` of one kind (front3d: 3D-FRONT; rest3d: REST3D page assets; sam3d: a
+    folder of SAM 3D Objects runs)."""
     return [s for s, spec in config["suites"].items() if spec.get("source", {}).get("kind") == kind]
 
 
@@ -50,6 +55,32 @@ def rest3d_inputs(wildcards):
     source = config["suites"][wildcards.suite]["source"]
     folder = os.path.join(source["root"], "assets", wildcards.scene, source.get("variant", "sam3d"))
     return {"simulation": os.path.join(folder, "simulation.json")}
+
+
+def sam3d_inputs(wildcards):
+    """The files one SAM 3D Objects run's import reads (its objects' pose.json and meshes, its camera, image, floor
+    and masks): a missing run fails the DAG naming the missing path."""
+    folder = os.path.join(config["suites"][wildcards.suite]["source"]["root"], wildcards.scene)
+    found = sorted(
+        glob.glob(os.path.join(folder, "*", "pose.json"))
+        + glob.glob(os.path.join(folder, "*", "mesh.*"))
+        + glob.glob(os.path.join(folder, "*", "mask.png"))
+        + [
+            os.path.join(folder, f)
+            for f in ("camera.json", "image.png", "segmentation.png", "floor.json")
+            if os.path.isfile(os.path.join(folder, f))
+        ]
+    )
+    return found or [os.path.join(folder, "<object id>", "pose.json")]
+
+
+def sam3d_camera_scenes(suite):
+    """The runs of a `sam3d` suite that give the camera's intrinsics (camera.json): their import writes the photo's
+    camera (reference/camera.json)."""
+    root = config["suites"][suite]["source"]["root"]
+    if not os.path.isdir(root):
+        return []
+    return [s for s in scene_ids(suite) if os.path.isfile(os.path.join(root, s, "camera.json"))]
 
 
 def benchmark_settings(wildcards):
@@ -193,7 +224,11 @@ def phi_scene_inputs(wildcards):
         "proxies": f"results/proxies/{wildcards.suite}/{wildcards.scene}.npz",
     }
     faithful = method_assembly(wildcards).get("faithful", {})  # config.yaml gives every key
-    has_camera = wildcards.suite in benchmark_suites() or wildcards.suite in source_suites("rest3d")
+    has_camera = (
+        wildcards.suite in benchmark_suites()
+        or wildcards.suite in source_suites("rest3d")
+        or (wildcards.suite in source_suites("sam3d") and wildcards.scene in sam3d_camera_scenes(wildcards.suite))
+    )
     if faithful.get("enabled") and (faithful.get("ray") or faithful.get("hidden_share", 0) > 0) and has_camera:
         inputs["camera"] = f"{base}/reference/camera.json"
     return inputs

@@ -546,6 +546,59 @@ def import_sam3d(in_dir: str | Path, out_dir: str | Path, floor: Floor | None = 
     return load_scene(init_dir / "scene.json")
 
 
+# -- workflow source ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Sam3dSource(Params):
+    """A suite of SAM 3D Objects runs (``config.yaml`` ``suites.<suite>.source`` with ``kind: sam3d``).
+
+    ``root`` holds one folder per scene, each one run in the input layout of the module docstring
+    (``<root>/<scene>/<object id>/pose.json`` + mesh, optional ``camera.json``, ``image.png``, ``floor.json``).
+
+    Attributes
+    ----------
+    root
+        The folder of runs, relative to the working directory.
+    kind
+        ``sam3d``.
+    params
+        Import settings (:class:`Sam3dParams`: units, levelling, walls).
+    """
+
+    _label = "SAM 3D source"
+
+    root: str
+    kind: str = "sam3d"
+    params: Sam3dParams = field(default_factory=Sam3dParams)
+
+    def check(self) -> None:
+        """Reject another kind (``ValueError``)."""
+        if self.kind != "sam3d":
+            raise ValueError(f"SAM 3D source kind must be 'sam3d', got {self.kind!r}")
+
+
+def scene_ids(root: str | Path) -> list[str]:
+    """The runs under ``root``: its sub-folders holding at least one ``<object id>/pose.json``, sorted.
+
+    Raises
+    ------
+    InputError
+        ``root`` is not a folder, or holds no run.
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise InputError(root, None, "folder of SAM 3D Objects runs not found")
+    found = sorted(p.name for p in root.iterdir() if p.is_dir() and any(p.glob("*/pose.json")))
+    if not found:
+        raise InputError(root, None, "no SAM 3D Objects runs (<scene>/<object id>/pose.json + mesh) in the folder")
+    return found
+
+
+def run_sam3d_scene(source: dict, scene: str, out_dir: str | Path) -> Scene:
+    """Workflow stage: one run of a ``sam3d`` source as ``OUT_DIR/initial/scene.json`` (+ ``reference/``)."""
+    src = Sam3dSource.from_dict(source)
+    return import_sam3d(Path(src.root) / scene, out_dir, params=src.params)
+
+
 # -- exporter (fixtures, round trips) --------------------------------------------------------------------------------
 def export_sam3d(scene: Scene, out_dir: str | Path, world_to_p3d: np.ndarray, variant: str = "mesh",
                  write_floor: bool = True) -> Path:
