@@ -161,3 +161,26 @@ def test_vertex_cap_keeps_points_of_the_hull():
     line = np.array([[0.0, 0, 0], [1.0, 0, 0], [3.0, 0, 0], [10.0, 0, 0]])
     np.testing.assert_array_equal(farthest_points(line, 2), line[[0, 3]])
     assert farthest_points(line, 9) is line
+
+
+def test_the_nearly_convex_decision_does_not_depend_on_the_units_of_the_mesh():
+    """A SAM 3D Objects mesh comes in a [-0.5, 0.5]^3 frame with its size in its pose; the same object baked in metres
+    must get the same proxies. Oracle: the decimated copy taken at 1/0.35 the size, scaled back, is the copy taken
+    in metres (to float32 precision), and so are the excess and the route; the plain decimation is not (its
+    quadric thresholds are absolute), which is what made a reconstructed pear's route flip."""
+    from phiscene.proxies import decimated_unit_free
+
+    rng = np.random.default_rng(0)
+    pear = open_dense(trimesh.creation.icosphere(3, 0.045).apply_scale([1.0, 1.0, 1.4]), 20000)
+    pear.vertices += rng.normal(0.0, 0.0015, pear.vertices.shape)  # a scan's noise: quadric errors differ
+    scaled = pear.copy().apply_scale(1 / 0.35)
+    a, b = decimated_unit_free(pear, 2000), decimated_unit_free(scaled, 2000)
+    assert len(a.faces) == len(b.faces) < len(pear.faces)
+    np.testing.assert_allclose(np.asarray(b.vertices) * 0.35, a.vertices, atol=1e-6 * np.linalg.norm(pear.extents))
+    assert hull_excess(a) == pytest.approx(hull_excess(b), abs=1e-6)
+    plain = decimated(pear, 2000), decimated(scaled, 2000)
+    assert len(plain[0].faces) != len(plain[1].faces) or not np.allclose(
+        np.asarray(plain[1].vertices) * 0.35, plain[0].vertices, atol=1e-4 * np.linalg.norm(pear.extents))
+    params = ProxyParams(backend="coacd", max_faces=2000)
+    (ha, ra), (hb, rb) = decompose_route(pear, params), decompose_route(scaled, params)
+    assert ra == rb and len(ha) == len(hb)

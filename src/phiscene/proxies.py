@@ -30,7 +30,7 @@ from phiscene.params import Params
 log = logging.getLogger(__name__)
 
 #: Bump when the decomposition code changes in a way that changes results.
-PROXY_VERSION = 6
+PROXY_VERSION = 7
 #: A hull vertex farther than this share of the mesh's bounding-box diagonal outside the mesh's convex hull makes
 #: :func:`fit_to_mesh` clip the hull (below it: floating-point noise of an exact decomposition, left alone).
 CLIP_TOLERANCE = 1e-4
@@ -159,6 +159,28 @@ def decimated(mesh: trimesh.Trimesh, max_faces: int) -> trimesh.Trimesh:
     return out if len(out.faces) >= 4 else mesh
 
 
+def decimated_unit_free(mesh: trimesh.Trimesh, max_faces: int) -> trimesh.Trimesh:
+    """:func:`decimated`, the same whatever the units of the mesh's frame: decimated centred on its bounding box and
+    scaled to a unit diagonal, then put back.
+
+    ``fast_simplification`` compares quadric errors (squared lengths) with fixed thresholds, so the same mesh in
+    other units decimates differently: a SAM 3D Objects mesh comes in a [-0.5, 0.5]^3 frame with its size in its
+    pose, the same object imported from a baked scene comes in metres. The nearly-convex decision of
+    :func:`decompose_route`, taken on the decimated copy, then flipped: a reconstructed pear's :func:`hull_excess`
+    was 0.0325 in metres and 0.0259 to 0.0369 at other scales, about the 0.03 tolerance (0.0333 at every scale
+    now).
+    """
+    if max_faces <= 0 or len(mesh.faces) <= max_faces:
+        return mesh
+    v = np.asarray(mesh.vertices, dtype=float)
+    centre = (v.min(axis=0) + v.max(axis=0)) / 2
+    size = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
+    if not size > 0:
+        return mesh
+    unit = decimated(trimesh.Trimesh((v - centre) / size, np.asarray(mesh.faces), process=False), max_faces)
+    return trimesh.Trimesh(np.asarray(unit.vertices) * size + centre, np.asarray(unit.faces), process=False)
+
+
 def hull_excess(mesh: trimesh.Trimesh, samples: int = 1024, seed: int = 0) -> float:
     """How far a mesh's convex hull reaches beyond the mesh: the 95th percentile of the distance from seeded
     samples of the hull's surface to the mesh surface, divided by the mesh's bounding-box diagonal.
@@ -182,7 +204,8 @@ def decompose_route(mesh: trimesh.Trimesh, params: ProxyParams) -> tuple[list[np
     """Convex decomposition of a local-frame mesh, and the route it took (:data:`ROUTES`).
 
     The mesh is first reduced to its outer shell (:func:`phiscene.solid.outer_shell`: the cavity of a hollow
-    reconstruction is part of the object) and decimated (``max_faces``); a nearly convex one
+    reconstruction is part of the object) and decimated (``max_faces``, :func:`decimated_unit_free`); a nearly
+    convex one
     (``convex_tolerance``) gets its convex hull; a hollow one is decomposed as the closed surface of its solid
     when that covers it (``solid_resolution``); anything else goes to the backend.
 
@@ -196,7 +219,7 @@ def decompose_route(mesh: trimesh.Trimesh, params: ProxyParams) -> tuple[list[np
     if params.backend == "convex":
         return [np.asarray(mesh.convex_hull.vertices, dtype=float)], "convex"
     shell = outer_shell(mesh)
-    work = decimated(shell, params.max_faces)
+    work = decimated_unit_free(shell, params.max_faces)
     if params.convex_tolerance > 0 and hull_excess(work, seed=params.seed) <= params.convex_tolerance:
         return fit_to_mesh([mesh.convex_hull.vertices], mesh, params.max_hull_vertices), "single_hull"
     if params.solid_resolution and params.backend == "coacd" and shell is not mesh:
