@@ -41,6 +41,18 @@ def test_ground_command_fixes_penetration_and_floating(tmp_path):
     assert metrics.returncode == 0, metrics.stderr
     m = json.loads(metrics.stdout)
     assert m["pen_depth"] < 1e-3 and m["drift_trans"] < 1e-3
+    # the export takes the proxies and the support graph grounding wrote beside the scene (recomputing them took a
+    # real scene minutes)
+    res = phiscene("export", str(tmp_path / "out/scene.json"), str(tmp_path / "exp"), "--config", str(cfg),
+                   "--no-check", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert f"proxies: {tmp_path / 'out/proxies.npz'}" in res.stdout and "topology.json" in res.stdout
+    assert not (tmp_path / "exp/proxies.npz").exists()
+    # grounding into the input's own folder is refused before anything is written over it
+    before = (tmp_path / "in/scene.json").read_bytes()
+    res = phiscene("ground", str(tmp_path / "in"), str(tmp_path / "in"), "--config", str(cfg), cwd=tmp_path)
+    assert res.returncode == 1 and "output folder is the input scene's folder" in res.stderr.strip().splitlines()[-1]
+    assert (tmp_path / "in/scene.json").read_bytes() == before
 
 
 def test_bad_input_is_one_line(tmp_path):

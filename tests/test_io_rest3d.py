@@ -237,3 +237,48 @@ def test_estimate_is_the_mode_with_most_votes_not_the_mean_of_all():
     assert [o for o, v in est.votes.items() if v["inlier"]] == ["c1", "c2"]
     mean = sum(est.votes[o]["weight"] * np.asarray(est.votes[o]["up"]) for o in est.votes)
     assert angle_deg(mean, est.votes["board"]["up"]) < 10.0
+
+
+def test_a_refused_import_writes_nothing_and_keeps_the_last_one(tmp_path):
+    """Each refusal names the source file and the problem, and the output folder keeps the earlier import whole:
+    two actors whose names keep the same id (only [A-Za-z0-9_.-] of a name is kept), no actors, a camera whose eye
+    is its target, a mesh with no volume, an output path that is a file."""
+    import shutil
+
+    write_scene(tmp_path, "s")
+    out = tmp_path / "out"
+    import_rest3d(tmp_path, "s", out)
+    before = {p.relative_to(out): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+    assert any(p.suffix == ".glb" for p in before)
+    folder = tmp_path / "assets/s/sam3d"
+    pristine = json.loads((folder / "simulation.json").read_text())
+
+    def broken(edit, match):
+        shutil.rmtree(tmp_path / "assets/bad", ignore_errors=True)
+        shutil.copytree(tmp_path / "assets/s", tmp_path / "assets/bad")
+        sim = json.loads(json.dumps(pristine))
+        edit(sim, tmp_path / "assets/bad/sam3d")
+        (tmp_path / "assets/bad/sam3d/simulation.json").write_text(json.dumps(sim))
+        with pytest.raises(InputError, match=match):
+            import_rest3d(tmp_path, "bad", out)
+        after = {p.relative_to(out): p.read_bytes() for p in sorted(out.rglob("*")) if p.is_file()}
+        assert after == before
+        assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".out")] == []  # no staging folder left
+
+    def twin(sim, f):  # "Kiste 1" and "Kiste_1" both keep the id Kiste_1
+        for name in ("Kiste 1", "Kiste_1"):
+            shutil.copy(f / "meshes/cardboard_box_000.glb", f / "meshes" / f"{name}.glb")
+            sim["actors"].append(name)
+            sim["tracks"][name] = sim["tracks"]["cardboard_box_000"]
+
+    broken(twin, r"Kiste_1.glb: object id 'Kiste_1' is also the id of .*Kiste 1.glb")
+    broken(lambda sim, f: sim.update(actors=[]), r"simulation.json: actors: no actors")
+    broken(lambda sim, f: sim["camera"].update(target=sim["camera"]["position"]), r"camera: .* finite and apart")
+
+    def flat(sim, f):
+        trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]).export(f / "meshes/white_plate_000.glb")
+
+    broken(flat, r"white_plate_000.glb: mesh has no volume")
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(InputError, match=r"afile: output folder is an existing file"):
+        import_rest3d(tmp_path, "s", tmp_path / "afile")

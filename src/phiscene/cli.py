@@ -90,6 +90,9 @@ def cmd_ground(args: argparse.Namespace) -> None:
     cfg = _config(args.config)
     scene = _scene_file(Path(args.scene_dir))
     out = Path(args.out_dir)
+    if out.resolve() == scene.parent.resolve():
+        raise PhisceneError(f"{out}: the output folder is the input scene's folder (grounding would write its "
+                            "scene.json over the input); pass another folder")
     cache = Path(args.cache_dir or cfg.get("cache_dir", out / "cache"))
     methods = cfg.get("methods") or {}
     if args.method == "phi_scene" and "phi_scene" not in methods:  # a config without it: its assembly section
@@ -165,12 +168,20 @@ def cmd_export(args: argparse.Namespace) -> None:
     scene = _scene_file(Path(args.scene))
     out = Path(args.out_dir)
     cache = Path(args.cache_dir or cfg.get("cache_dir", out / ".cache"))
-    proxies = Path(args.proxies) if args.proxies else out / "proxies.npz"
-    if not args.proxies:
+    # `phiscene ground` writes the scene's proxies and support graph beside it: taken unless others are given
+    beside = {name: scene.parent / name for name in ("proxies.npz", "topology.json")}
+    proxies = Path(args.proxies) if args.proxies else beside["proxies.npz"]
+    if args.proxies or proxies.is_file():
+        print(f"[1/3] proxies: {proxies}", flush=True)
+    else:
+        proxies = out / "proxies.npz"
         print(f"[1/3] proxies for {scene}", flush=True)
         pipeline.run_proxies(scene, proxies, cfg.get("proxies", {}), cache)
-    topology = Path(args.topology) if args.topology else out / "topology.json"
-    if not args.topology:
+    topology = Path(args.topology) if args.topology else beside["topology.json"]
+    if args.topology or topology.is_file():
+        print(f"[2/3] support graph: {topology}", flush=True)
+    else:
+        topology = out / "topology.json"
         print("[2/3] support graph (geometric)", flush=True)
         pipeline.run_topology(scene, topology, "geometric", cfg.get("topology", {}).get("geometric", {}))
     print("[3/3] export (GLB, URDF, MJCF, USD, support graph)" + ("" if args.no_check else " + round-trip check"),
@@ -349,8 +360,10 @@ def build_parser() -> argparse.ArgumentParser:
     e = sub.add_parser("export", help="simulation-ready export of one scene (GLB, URDF, MJCF, USD, support graph)")
     e.add_argument("scene", help="scene.json or its folder (a settled scene)")
     e.add_argument("out_dir", help="output folder")
-    e.add_argument("--proxies", help="convex proxies .npz of the scene (default: computed with the config's settings)")
-    e.add_argument("--topology", help="support graph JSON (default: inferred with the geometric backend)")
+    e.add_argument("--proxies", help="convex proxies .npz of the scene (default: proxies.npz beside the scene, as "
+                                     "phiscene ground writes it, else computed with the config's settings)")
+    e.add_argument("--topology", help="support graph JSON (default: topology.json beside the scene, else inferred "
+                                      "with the geometric backend)")
     e.add_argument("--no-check", action="store_true", help="skip the round-trip release in pybullet and MuJoCo")
     e.add_argument("--demo", action="store_true", help="also throw a ball into the export: OUT_DIR/demo.gif")
     e.set_defaults(func=cmd_export)

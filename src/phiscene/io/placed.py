@@ -290,13 +290,55 @@ def import_placed(objects: list[PlacedObject], out_dir: str | Path, params: Plac
     Raises
     ------
     InputError
-        An object implausible in metres once levelled (:func:`phiscene.scene.check_world_bounds`), naming its
-        file; nothing is written then.
+        Naming the source file and the problem, and nothing is written (what ``OUT_DIR`` held stays as it was):
+        no objects, two objects with one id, a camera whose eye is its target or whose field of view is not in
+        (0, 180) degrees, a mesh with no volume in metres, an object implausible in metres once levelled
+        (:func:`phiscene.scene.check_world_bounds`), ``OUT_DIR`` an existing file. The scene is written into a
+        staging folder beside ``OUT_DIR`` and moved into place once it loads back whole
+        (:func:`phiscene.atomic.staged_folder`).
 
     Returns
     -------
     The written scene, loaded back (validated).
     """
+    from phiscene.atomic import staged_folder
+
+    out_dir = Path(out_dir)
+    check_placed(objects, camera, params.unit_scale, out_dir)
+    with staged_folder(out_dir) as stage:
+        _write_placed(objects, stage, params, camera, source, transform)
+    scene = load_scene(out_dir / "initial" / "scene.json")
+    log.info("%s: %d objects, levelled by %.2f deg, %d walls estimated", out_dir, len(scene),
+             scene.meta["levelling"]["rotation_deg"], len(scene.structure))
+    return scene
+
+
+def check_placed(objects: list[PlacedObject], camera: Camera | None, unit_scale: float, out_dir: Path) -> None:
+    """The checks of :func:`import_placed` that need no levelling (``InputError`` naming the file and the problem)."""
+    from phiscene.meshes import check_mesh
+
+    if not objects:
+        raise InputError(out_dir, None, "no objects to import")
+    seen: dict[str, Path] = {}
+    for o in objects:
+        if o.id in seen:
+            raise InputError(o.source, None, f"object id {o.id!r} is also the id of {seen[o.id]} (ids keep only "
+                             "[A-Za-z0-9_.-] of a name: rename one of them)")
+        seen[o.id] = o.source
+        mesh = o.mesh if unit_scale == 1.0 else o.mesh.copy().apply_scale(unit_scale)
+        check_mesh(mesh, o.source)
+    if camera is not None:
+        eye, target = np.asarray(camera.eye, dtype=float), np.asarray(camera.target, dtype=float)
+        if not (np.all(np.isfinite(eye)) and np.all(np.isfinite(target)) and np.linalg.norm(target - eye) > 0):
+            raise InputError(None, "camera", f"the camera's eye {eye.tolist()} and target {target.tolist()} must be "
+                             "finite and apart")
+        if not 0.0 < float(camera.fov_y_deg) < 180.0:
+            raise InputError(None, "camera", f"field of view {camera.fov_y_deg} deg is not in (0, 180)")
+
+
+def _write_placed(objects: list[PlacedObject], out_dir: Path, params: PlacedParams, camera: Camera | None,
+                  source: dict | None, transform: np.ndarray | None) -> Scene:
+    """:func:`import_placed`'s writing, into ``out_dir`` (its staging folder)."""
     from phiscene.meshes import save_mesh
     from phiscene.render import look_at_camera
 
@@ -343,9 +385,7 @@ def import_placed(objects: list[PlacedObject], out_dir: str | Path, params: Plac
         "format": IMPORT_FORMAT, "source": source or {}, "params": asdict(params),
         "transform": np.round(T, 12).tolist(), "levelling_rotation_deg": levelling.rotation_deg,
         "up_estimate": up_record, "walls": walls.record, "objects": {o.id: o.source.name for o in objects}})
-    log.info("%s: %d objects, levelled by %.2f deg, %d walls estimated", out_dir, len(objects),
-             levelling.rotation_deg, len(walls.planes))
-    return load_scene(init_dir / "scene.json")
+    return load_scene(init_dir / "scene.json")  # loads back whole (meshes checked) before it is moved into place
 
 
 def in_metres(objects: list[PlacedObject], camera: Camera | None,

@@ -119,6 +119,8 @@ def read_rest3d_dir(folder: str | Path) -> Rest3dScene:
     sim = read_json(sim_path)
     if not isinstance(sim, dict) or not isinstance(sim.get("actors"), list) or not isinstance(sim.get("tracks"), dict):
         raise InputError(sim_path, None, "expected {'actors': [...], 'tracks': {...}}")
+    if not sim["actors"]:
+        raise InputError(sim_path, "actors", "no actors")
     objects = []
     for actor in sim["actors"]:
         mesh_path = folder / "meshes" / f"{actor}.glb"

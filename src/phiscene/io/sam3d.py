@@ -472,78 +472,82 @@ def import_sam3d(in_dir: str | Path, out_dir: str | Path, floor: Floor | None = 
     InputError
         Naming the file and field of the first problem in the input.
     """
+    from phiscene.atomic import staged_folder
     from phiscene.meshes import save_mesh
     from phiscene.render import load_png, save_png, segmentation_colors
     from phiscene.schemas import read_json
 
-    in_dir, out_dir = Path(in_dir), Path(out_dir)
-    params.check()
-    objects = read_sam3d_dir(in_dir)
-    units = np.diag([params.unit_scale] * 3 + [1.0])
-    cam_poses = [units @ o.pose for o in objects]
-    verts = [o.mesh.vertices @ P[:3, :3].T + P[:3, 3] for o, P in zip(objects, cam_poses)]
-    floor_source, estimate = "argument", None
-    if floor is None and (in_dir / "floor.json").is_file():
-        floor, floor_source = read_floor(in_dir / "floor.json"), "floor.json"
-    if floor is None:
-        floor, estimate = levelled_floor([o.mesh.copy().apply_transform(P) for o, P in zip(objects, cam_poses)],
-                                         params.levelling)
-        floor_source = "estimated"
-    else:
-        floor = orient_floor(Floor(floor.normal, floor.offset * params.unit_scale), np.concatenate(verts))
-    W = world_from_camera(floor)
-    lowest = float(min(floor.signed_distance(v).min() for v in verts))
-    if lowest < -0.5 * float(np.ptp(np.concatenate(verts)[:, 1])):
-        log.warning("%s: objects reach %.3f m below the floor plane; is the floor right?", in_dir, -lowest)
+    in_dir, final = Path(in_dir), Path(out_dir)
+    with staged_folder(final) as out_dir:  # everything written there, moved into place when whole
+        params.check()
+        objects = read_sam3d_dir(in_dir)
+        units = np.diag([params.unit_scale] * 3 + [1.0])
+        cam_poses = [units @ o.pose for o in objects]
+        verts = [o.mesh.vertices @ P[:3, :3].T + P[:3, 3] for o, P in zip(objects, cam_poses)]
+        floor_source, estimate = "argument", None
+        if floor is None and (in_dir / "floor.json").is_file():
+            floor, floor_source = read_floor(in_dir / "floor.json"), "floor.json"
+        if floor is None:
+            floor, estimate = levelled_floor([o.mesh.copy().apply_transform(P) for o, P in zip(objects, cam_poses)],
+                                             params.levelling)
+            floor_source = "estimated"
+        else:
+            floor = orient_floor(Floor(floor.normal, floor.offset * params.unit_scale), np.concatenate(verts))
+        W = world_from_camera(floor)
+        lowest = float(min(floor.signed_distance(v).min() for v in verts))
+        if lowest < -0.5 * float(np.ptp(np.concatenate(verts)[:, 1])):
+            log.warning("%s: objects reach %.3f m below the floor plane; is the floor right?", in_dir, -lowest)
 
-    colors = segmentation_colors(len(objects))
-    given = [o.color for o in objects if o.color is not None]
-    if given:
-        if len(given) != len(objects):
-            missing = [o.id for o in objects if o.color is None]
-            raise InputError(in_dir, "color", f"some objects give a segmentation colour and others do not: {missing}")
-        colors = given
-    init_dir, ref_dir = out_dir / "initial", out_dir / "reference"
-    scene_objects = []
-    for o, P, c in zip(objects, cam_poses, colors):
-        mesh_path = save_mesh(o.mesh, init_dir / "meshes" / f"{o.id}.glb")
-        scene_objects.append(SceneObject(o.id, mesh_path.resolve(), W @ P, o.description or o.id, tuple(c),
-                                         {"sam3d": {"variant": o.variant}}))
-    camera_path = None
-    if (in_dir / "image.png").is_file():
-        _copy(in_dir / "image.png", ref_dir / "image.png")
-    seg_src = in_dir / "segmentation.png"
-    if seg_src.is_file():
-        _copy(seg_src, ref_dir / "segmentation.png")
-    elif any(o.mask is not None for o in objects):
-        save_png(compose_segmentation(objects, colors), ref_dir / "segmentation.png")
-    if (in_dir / "camera.json").is_file():
-        cam = camera_json(read_json(in_dir / "camera.json"), invert(W), where=in_dir / "camera.json")
-        image = ref_dir / "image.png"
-        if image.is_file() and load_png(image).shape[:2] != (cam["height"], cam["width"]):
-            raise InputError(in_dir / "camera.json", "width", "image size differs from image.png")
-        camera_path = ref_dir / "camera.json"
-        write_json(camera_path, cam)
-    from phiscene.levelling import angle_deg
-    from phiscene.walls import estimate_walls
+        colors = segmentation_colors(len(objects))
+        given = [o.color for o in objects if o.color is not None]
+        if given:
+            if len(given) != len(objects):
+                missing = [o.id for o in objects if o.color is None]
+                raise InputError(in_dir, "color",
+                                 f"some objects give a segmentation colour and others do not: {missing}")
+            colors = given
+        init_dir, ref_dir = out_dir / "initial", out_dir / "reference"
+        scene_objects = []
+        for o, P, c in zip(objects, cam_poses, colors):
+            mesh_path = save_mesh(o.mesh, init_dir / "meshes" / f"{o.id}.glb")
+            scene_objects.append(SceneObject(o.id, mesh_path.resolve(), W @ P, o.description or o.id, tuple(c),
+                                             {"sam3d": {"variant": o.variant}}))
+        camera_path = None
+        if (in_dir / "image.png").is_file():
+            _copy(in_dir / "image.png", ref_dir / "image.png")
+        seg_src = in_dir / "segmentation.png"
+        if seg_src.is_file():
+            _copy(seg_src, ref_dir / "segmentation.png")
+        elif any(o.mask is not None for o in objects):
+            save_png(compose_segmentation(objects, colors), ref_dir / "segmentation.png")
+        if (in_dir / "camera.json").is_file():
+            cam = camera_json(read_json(in_dir / "camera.json"), invert(W), where=in_dir / "camera.json")
+            image = ref_dir / "image.png"
+            if image.is_file() and load_png(image).shape[:2] != (cam["height"], cam["width"]):
+                raise InputError(in_dir / "camera.json", "width", "image size differs from image.png")
+            camera_path = ref_dir / "camera.json"
+            write_json(camera_path, cam)
+        from phiscene.levelling import angle_deg
+        from phiscene.walls import estimate_walls
 
-    # the tilt corrected: the angle between the camera's up (PyTorch3D +Y) and the floor's normal
-    tilt = angle_deg(floor.normal, [0.0, 1.0, 0.0])
-    walls = estimate_walls(Scene(scene_objects, ground_height=0.0), params.walls, W[:3, 3])
-    meta = {"source": {"kind": "sam3d", "path": str(in_dir)}, "floor": {**floor.to_dict(), "from": floor_source},
-            "levelling": {"rotation_deg": tilt, "transform": np.round(W, 12).tolist()}, "walls": walls.record}
-    scene = Scene(scene_objects, ground_height=0.0, camera=camera_path, meta=meta, structure=walls.planes)
-    save_scene(scene, init_dir / "scene.json")
-    write_json(out_dir / "import.json", {
-        "format": IMPORT_FORMAT, "source": str(in_dir), "params": asdict(params),
-        "floor": {**floor.to_dict(), "from": floor_source}, "world_from_camera": np.round(W, 12).tolist(),
-        "camera_height": float(floor.offset), "levelling_rotation_deg": tilt,
-        "up_estimate": None if estimate is None else estimate.to_dict(), "walls": walls.record,
-        "objects": {o.id: o.variant for o in objects}, "lowest_below_floor": max(0.0, -lowest)})
-    log.info("%s: %d objects, floor %s (%s, %.2f deg from the camera's up), camera %.3f m above it, %d walls "
-             "estimated", in_dir, len(objects), np.round(floor.normal, 4).tolist(), floor_source, tilt, floor.offset,
-             len(walls.planes))
-    return load_scene(init_dir / "scene.json")
+        # the tilt corrected: the angle between the camera's up (PyTorch3D +Y) and the floor's normal
+        tilt = angle_deg(floor.normal, [0.0, 1.0, 0.0])
+        walls = estimate_walls(Scene(scene_objects, ground_height=0.0), params.walls, W[:3, 3])
+        meta = {"source": {"kind": "sam3d", "path": str(in_dir)}, "floor": {**floor.to_dict(), "from": floor_source},
+                "levelling": {"rotation_deg": tilt, "transform": np.round(W, 12).tolist()}, "walls": walls.record}
+        scene = Scene(scene_objects, ground_height=0.0, camera=camera_path, meta=meta, structure=walls.planes)
+        save_scene(scene, init_dir / "scene.json")
+        write_json(out_dir / "import.json", {
+            "format": IMPORT_FORMAT, "source": str(in_dir), "params": asdict(params),
+            "floor": {**floor.to_dict(), "from": floor_source}, "world_from_camera": np.round(W, 12).tolist(),
+            "camera_height": float(floor.offset), "levelling_rotation_deg": tilt,
+            "up_estimate": None if estimate is None else estimate.to_dict(), "walls": walls.record,
+            "objects": {o.id: o.variant for o in objects}, "lowest_below_floor": max(0.0, -lowest)})
+        load_scene(init_dir / "scene.json")  # loads back whole (meshes checked) before it is moved into place
+        log.info("%s: %d objects, floor %s (%s, %.2f deg from the camera's up), camera %.3f m above it, %d walls "
+                 "estimated", in_dir, len(objects), np.round(floor.normal, 4).tolist(), floor_source, tilt,
+                 floor.offset, len(walls.planes))
+    return load_scene(final / "initial" / "scene.json")
 
 
 # -- workflow source ------------------------------------------------------------------------------------------------
