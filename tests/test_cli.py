@@ -169,3 +169,24 @@ def test_import_rest3d_estimates_walls_unless_told_not_to(tmp_path):
         assert res.returncode == 0, res.stderr
         assert f"{walls} walls estimated" in res.stdout
         assert len(load_scene(out / "initial" / "scene.json").structure) == walls
+
+
+def test_interrupt_and_a_list_of_placements_are_one_line(tmp_path, monkeypatch, capsys):
+    """Ctrl-C ends a command with status 130 and one line (not a KeyboardInterrupt traceback); a placements file
+    that is not a mapping is refused naming it."""
+    import pytest
+
+    from phiscene import cli
+    from phiscene.errors import InputError
+    from phiscene.io.placed import read_placed_dir
+
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "cmd_failures", interrupted)
+    assert cli.main(["failures", str(tmp_path)]) == 130
+    assert capsys.readouterr().err.strip() == "phiscene: interrupted (failures)"
+    save_mesh(trimesh.creation.box([0.1, 0.1, 0.1]), tmp_path / "meshes/box.glb")
+    (tmp_path / "placements.json").write_text("[1, 2, 3]")
+    with pytest.raises(InputError, match=r"placements.json: expected a mapping of object ids .* got a list"):
+        read_placed_dir(tmp_path / "meshes", tmp_path / "placements.json")

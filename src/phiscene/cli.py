@@ -385,6 +385,9 @@ def main(argv: list[str] | None = None) -> int:
     except PhisceneError as exc:
         print(f"phiscene: error: {exc}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:  # Ctrl-C: the writers are atomic, so nothing half-written is left behind
+        print(f"phiscene: interrupted ({args.command})", file=sys.stderr)
+        return 130
     return 0
 
 

@@ -207,6 +207,9 @@ def read_placed_dir(folder: str | Path, placements: str | Path | dict | None = N
         except (OSError, json.JSONDecodeError) as exc:
             raise InputError(where, None, f"cannot read placements ({exc})") from None
     placements = placements or {}
+    if not isinstance(placements, dict):
+        raise InputError(where, None, f"expected a mapping of object ids (file stems) to placements, got a "
+                         f"{type(placements).__name__}")
     objects, seen = [], set()
     for f in files:
         oid = object_id(f.stem)
