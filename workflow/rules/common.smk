@@ -74,13 +74,18 @@ def sam3d_inputs(wildcards):
     return found or [os.path.join(folder, "<object id>", "pose.json")]
 
 
-def sam3d_camera_scenes(suite):
-    """The runs of a `sam3d` suite that give the camera's intrinsics (camera.json): their import writes the photo's
+def sam3d_has_camera(suite, scene):
+    """Whether a run of a `sam3d` suite gives the camera's intrinsics (camera.json): its import writes the photo's
     camera (reference/camera.json)."""
+    return os.path.isfile(os.path.join(config["suites"][suite]["source"]["root"], scene, "camera.json"))
+
+
+def sam3d_camera_scenes(suite):
+    """The runs of a `sam3d` suite that give the camera's intrinsics (`sam3d_has_camera`)."""
     root = config["suites"][suite]["source"]["root"]
     if not os.path.isdir(root):
         return []
-    return [s for s in scene_ids(suite) if os.path.isfile(os.path.join(root, s, "camera.json"))]
+    return [s for s in scene_ids(suite) if sam3d_has_camera(suite, s)]
 
 
 def benchmark_settings(wildcards):
@@ -227,7 +232,7 @@ def phi_scene_inputs(wildcards):
     has_camera = (
         wildcards.suite in benchmark_suites()
         or wildcards.suite in source_suites("rest3d")
-        or (wildcards.suite in source_suites("sam3d") and wildcards.scene in sam3d_camera_scenes(wildcards.suite))
+        or (wildcards.suite in source_suites("sam3d") and sam3d_has_camera(wildcards.suite, wildcards.scene))
     )
     if faithful.get("enabled") and (faithful.get("ray") or faithful.get("hidden_share", 0) > 0) and has_camera:
         inputs["camera"] = f"{base}/reference/camera.json"

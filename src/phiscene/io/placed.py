@@ -307,7 +307,8 @@ def import_placed(objects: list[PlacedObject], out_dir: str | Path, params: Plac
     from phiscene.atomic import staged_folder
 
     out_dir = Path(out_dir)
-    check_placed(objects, camera, params.unit_scale, out_dir)
+    objects, camera = in_metres(objects, camera, params.unit_scale)
+    check_placed(objects, camera, out_dir)
     with staged_folder(out_dir) as stage:
         _write_placed(objects, stage, params, camera, source, transform)
     scene = load_scene(out_dir / "initial" / "scene.json")
@@ -316,8 +317,9 @@ def import_placed(objects: list[PlacedObject], out_dir: str | Path, params: Plac
     return scene
 
 
-def check_placed(objects: list[PlacedObject], camera: Camera | None, unit_scale: float, out_dir: Path) -> None:
-    """The checks of :func:`import_placed` that need no levelling (``InputError`` naming the file and the problem)."""
+def check_placed(objects: list[PlacedObject], camera: Camera | None, out_dir: Path) -> None:
+    """The checks of :func:`import_placed` that need no levelling, on objects and camera in metres (``InputError``
+    naming the file and the problem)."""
     from phiscene.meshes import check_mesh
 
     if not objects:
@@ -328,8 +330,7 @@ def check_placed(objects: list[PlacedObject], camera: Camera | None, unit_scale:
             raise InputError(o.source, None, f"object id {o.id!r} is also the id of {seen[o.id]} (ids keep only "
                              "[A-Za-z0-9_.-] of a name: rename one of them)")
         seen[o.id] = o.source
-        mesh = o.mesh if unit_scale == 1.0 else o.mesh.copy().apply_scale(unit_scale)
-        check_mesh(mesh, o.source)
+        check_mesh(o.mesh, o.source)
     if camera is not None:
         eye, target = np.asarray(camera.eye, dtype=float), np.asarray(camera.target, dtype=float)
         if not (np.all(np.isfinite(eye)) and np.all(np.isfinite(target)) and np.linalg.norm(target - eye) > 0):
@@ -341,12 +342,11 @@ def check_placed(objects: list[PlacedObject], camera: Camera | None, unit_scale:
 
 def _write_placed(objects: list[PlacedObject], out_dir: Path, params: PlacedParams, camera: Camera | None,
                   source: dict | None, transform: np.ndarray | None) -> Scene:
-    """:func:`import_placed`'s writing, into ``out_dir`` (its staging folder)."""
+    """:func:`import_placed`'s writing, into ``out_dir`` (its staging folder), of objects and camera in metres."""
     from phiscene.meshes import save_mesh
     from phiscene.render import look_at_camera
 
     out_dir = Path(out_dir)
-    objects, camera = in_metres(objects, camera, params.unit_scale)
     if transform is None:
         levelling = level_objects(objects, params, camera)
     else:

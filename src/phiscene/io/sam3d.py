@@ -483,13 +483,13 @@ def import_sam3d(in_dir: str | Path, out_dir: str | Path, floor: Floor | None = 
         objects = read_sam3d_dir(in_dir)
         units = np.diag([params.unit_scale] * 3 + [1.0])
         cam_poses = [units @ o.pose for o in objects]
-        verts = [o.mesh.vertices @ P[:3, :3].T + P[:3, 3] for o, P in zip(objects, cam_poses)]
+        cam_meshes = [o.mesh.copy().apply_transform(P) for o, P in zip(objects, cam_poses)]  # camera frame
+        verts = [np.asarray(m.vertices) for m in cam_meshes]
         floor_source, estimate = "argument", None
         if floor is None and (in_dir / "floor.json").is_file():
             floor, floor_source = read_floor(in_dir / "floor.json"), "floor.json"
         if floor is None:
-            floor, estimate = levelled_floor([o.mesh.copy().apply_transform(P) for o, P in zip(objects, cam_poses)],
-                                             params.levelling)
+            floor, estimate = levelled_floor(cam_meshes, params.levelling)
             floor_source = "estimated"
         else:
             floor = orient_floor(Floor(floor.normal, floor.offset * params.unit_scale), np.concatenate(verts))
