@@ -113,3 +113,19 @@ def test_structure_and_attached_round_trip(scene_file, tmp_path):
 def test_structure_errors_name_the_field(scene_file, change, field):
     with pytest.raises(InputError, match=field.replace("[", r"\[").replace("]", r"\]")):
         load_scene(edit(scene_file, change))
+
+
+@pytest.mark.parametrize("side,accepted", [(40.0, True), (60.0, False)])
+def test_object_size_limit_does_not_depend_on_its_rotation(tmp_path, side, accepted):
+    # a 40 m cube is accepted level and turned 45 deg about z (its box then spans 56.6 m: the limit is 50 m); a 60 m
+    # one is refused either way, naming the object
+    mesh = save_mesh(trimesh.creation.box([side] * 3), tmp_path / "meshes" / "long.ply")
+    for k, R in enumerate((np.eye(3), rotation_z(np.pi / 4))):
+        pose = make_pose(R)
+        pose[2, 3] = side / 2
+        path = save_scene(Scene([SceneObject("long", mesh, pose)]), tmp_path / f"scene{k}.json")
+        if accepted:
+            assert load_scene(path).get("long") is not None
+        else:
+            with pytest.raises(InputError, match=r"objects\[0\].*60 m across"):
+                load_scene(path)

@@ -20,7 +20,7 @@ from phiscene import schemas
 from phiscene.atomic import write_json
 from phiscene.errors import InputError
 from phiscene.tolerances import TOL
-from phiscene.transforms import rigidity_error, transform_points
+from phiscene.transforms import decompose, rigidity_error, transform_points
 
 FORMAT = "phiscene.scene/1"
 
@@ -413,11 +413,14 @@ def _check_placement(path: Path, index: int, obj: SceneObject, local_bounds: np.
     import trimesh
 
     world = transform_points(obj.pose, trimesh.bounds.corners(local_bounds))
-    check_world_bounds(path, f"objects[{index}]", world.min(axis=0), world.max(axis=0), ground)
+    # its size from its own box, whatever its rotation: an object an import accepted is not refused once grounding
+    # turned it (the corners of a turned box span up to sqrt(3) times its side)
+    size = float(np.max(local_bounds[1] - local_bounds[0])) * decompose(obj.pose)[2]
+    check_world_bounds(path, f"objects[{index}]", world.min(axis=0), world.max(axis=0), ground, size=size)
 
 
 def check_world_bounds(path: str | Path | None, where: str, lo: np.ndarray, hi: np.ndarray, ground: float,
-                       hint: str = "") -> None:
+                       hint: str = "", size: float | None = None) -> None:
     """Refuse an object whose world bounding box is implausible for a scene in metres above its ground.
 
     Parameters
@@ -430,6 +433,9 @@ def check_world_bounds(path: str | Path | None, where: str, lo: np.ndarray, hi: 
         Height of the ground (m).
     hint
         Appended to the unit messages (an importer names its option for other units).
+    size
+        The object's size (m; default the largest side of the box): an object placed with a rotation gives the
+        largest side of its own box, which the rotation does not change.
 
     Raises
     ------
@@ -439,7 +445,7 @@ def check_world_bounds(path: str | Path | None, where: str, lo: np.ndarray, hi: 
     """
     lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
     pose_field = f"{where}.pose" if where else None
-    size = float((hi - lo).max())
+    size = float((hi - lo).max()) if size is None else float(size)
     if size > TOL.max_object_size:
         raise InputError(path, where or None, f"object is {size:.4g} m across (more than {TOL.max_object_size} m): "
                          f"units must be metres (is the scene in millimetres?){hint}")
