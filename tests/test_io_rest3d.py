@@ -31,6 +31,20 @@ def test_tilted_scene_is_levelled_within_one_degree(tmp_path, tilt, poster):
     assert lev.rotation_deg == pytest.approx(angle_deg(truth, [0.0, 1.0, 0.0]), abs=1.0)
 
 
+@pytest.mark.parametrize("tilt,warned", [((5.0, 2.0), False), ((36.0, 0.0), True)])
+def test_large_levelling_is_warned(tmp_path, caplog, tilt, warned):
+    # a scene levelled by more than any camera tilt of a real scene (here the fixture tilted 36 deg) is warned
+    # about, naming --up (files whose up axis is not the one given level onto whatever lies near it)
+    import logging
+
+    R = write_scene(tmp_path, "s", tilt)
+    data = read_rest3d(tmp_path, "s", "sam3d")
+    with caplog.at_level(logging.WARNING, logger="phiscene.io.placed"):
+        lev = level_objects(data.objects, PlacedParams(), data.camera)
+    assert angle_deg(source_up(lev), R @ np.array([0.0, 1.0, 0.0])) < 1.0
+    assert any("--up" in r.getMessage() for r in caplog.records) == warned
+
+
 def test_table_top_only_scene_without_floor(tmp_path):
     """A close-up: only things on a table top, no table legs, no floor: the plate and box tops still vote."""
     R = Rotation.from_euler("xz", [15.0, -3.0], degrees=True).as_matrix()
