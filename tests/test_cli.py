@@ -190,3 +190,33 @@ def test_interrupt_and_a_list_of_placements_are_one_line(tmp_path, monkeypatch, 
     (tmp_path / "placements.json").write_text("[1, 2, 3]")
     with pytest.raises(InputError, match=r"placements.json: expected a mapping of object ids .* got a list"):
         read_placed_dir(tmp_path / "meshes", tmp_path / "placements.json")
+
+
+def test_threads_do_not_change_the_result(tmp_path):
+    # a table (top and four legs: CoACD decomposes it) with a cube on it, grounded with 1 and with 2 threads from
+    # empty caches: the same proxies and the same grounded scene, to the bit
+    parts = [trimesh.creation.box([0.8, 0.5, 0.04], transform=trimesh.transformations.translation_matrix([0, 0, 0.38]))]
+    for x in (-0.36, 0.36):
+        for y in (-0.21, 0.21):
+            parts.append(trimesh.creation.box([0.05, 0.05, 0.36],
+                                              transform=trimesh.transformations.translation_matrix([x, y, 0.18])))
+    table = save_mesh(trimesh.util.concatenate(parts), tmp_path / "meshes/table.glb")
+    cube = save_mesh(trimesh.creation.box([0.1, 0.1, 0.1]), tmp_path / "meshes/cube.glb")
+    scene = Scene([SceneObject("table", table, make_pose(translation=[0, 0, 0.01])),
+                   SceneObject("cube", cube, make_pose(translation=[0.05, 0, 0.46]))])
+    save_scene(scene, tmp_path / "in/scene.json")
+    outs = []
+    for threads in (1, 2):
+        cfg = tmp_path / f"cfg{threads}.yaml"
+        cfg.write_text(f"proxies: {{mcts_iterations: 10, mcts_nodes: 8, resolution: 300}}\n"
+                       f"cache_dir: {tmp_path / f'cache{threads}'}\n")
+        res = phiscene("--threads", str(threads), "ground", str(tmp_path / "in"), str(tmp_path / f"out{threads}"),
+                       "--config", str(cfg), cwd=tmp_path)
+        assert res.returncode == 0, res.stderr
+        outs.append(tmp_path / f"out{threads}")
+    a, b = (read_proxies(o / "proxies.npz")["table"] for o in outs)
+    assert a.meta["route"] == "decomposed" and len(a.hulls) > 1
+    assert [h.tobytes() for h in a.hulls] == [h.tobytes() for h in b.hulls]
+    assert (outs[0] / "scene.json").read_bytes() == (outs[1] / "scene.json").read_bytes()
+    res = phiscene("--threads", "0", "ground", str(tmp_path / "in"), str(tmp_path / "out0"), cwd=tmp_path)
+    assert res.returncode == 2 and "--threads: must be at least 1" in res.stderr
