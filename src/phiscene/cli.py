@@ -292,9 +292,8 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="phiscene", description=__doc__.split("\n\n")[0])
     ap.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     ap.add_argument("--threads", type=_positive_int, default=1,
-                    help="threads for the libraries that use them (CoACD's decomposition, BLAS, torch, open3d; "
-                         "default 1). The result does not depend on it: cold proxies of a 30k-face scene are the "
-                         "most of a cold run and CoACD divides among threads")
+                    help="threads for the libraries that use them (CoACD's decomposition of cold proxies, BLAS, "
+                         "torch, open3d; default 1, as every workflow job runs); the result does not depend on it")
     sub = ap.add_subparsers(dest="command", required=True)
 
     g = sub.add_parser("ground", help="physically ground one scene (proxies, topology, SDF + settling)")
