@@ -319,7 +319,8 @@ def import_placed(objects: list[PlacedObject], out_dir: str | Path, params: Plac
     check_placed(objects, camera, out_dir)
     with staged_folder(out_dir) as stage:
         _write_placed(objects, stage, params, camera, source, transform)
-    scene = load_scene(out_dir / "initial" / "scene.json")
+    # its meshes were loaded and checked in the staging folder; the move changed no byte of them
+    scene = load_scene(out_dir / "initial" / "scene.json", check_meshes=False)
     log.info("%s: %d objects, levelled by %.2f deg, %d walls estimated", out_dir, len(scene),
              scene.meta["levelling"]["rotation_deg"], len(scene.structure))
     return scene

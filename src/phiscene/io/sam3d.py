@@ -547,7 +547,8 @@ def import_sam3d(in_dir: str | Path, out_dir: str | Path, floor: Floor | None = 
         log.info("%s: %d objects, floor %s (%s, %.2f deg from the camera's up), camera %.3f m above it, %d walls "
                  "estimated", in_dir, len(objects), np.round(floor.normal, 4).tolist(), floor_source, tilt,
                  floor.offset, len(walls.planes))
-    return load_scene(final / "initial" / "scene.json")
+    # its meshes were loaded and checked in the staging folder; the move changed no byte of them
+    return load_scene(final / "initial" / "scene.json", check_meshes=False)
 
 
 # -- workflow source ------------------------------------------------------------------------------------------------
