@@ -34,6 +34,7 @@ from phiscene.transforms import decompose, make_pose
 torch.set_num_threads(1)
 SIM = SimSettings()
 FAITHFUL = {"faithful": {"enabled": True}}
+PHI_SCENE_SDF = {"optimizer": "steepest", "search_directions": 32, "rotate_over": 0.02}  # phi_scene's (config)
 
 
 @pytest.fixture(scope="module")
@@ -299,6 +300,28 @@ def test_post_under_a_table_top_edge_is_pushed_out_sideways_and_stands(work, rea
     assert out.get("post").world_mesh().bounds[0, 2] == pytest.approx(0.0, abs=0.003)
     assert out.get("post").world_mesh().bounds[0, 0] >= edge - 1e-3  # beside the slab, not under it
     assert post["certificate"]["joint_stable"] and rec["objects"]["slab"]["certificate"]["joint_stable"]
+
+
+@pytest.mark.parametrize("lift", [0.5, 0.0])
+def test_a_box_sunk_into_a_plinth_to_the_floor_is_lifted_onto_it_not_slid_out(work, lift):
+    # a plinth (80 x 80 x 10 cm) on the floor; a 10 cm box sunk into it down to the floor, 10 cm from its centre
+    # (a depth error), which the graph puts on the floor alone: out sideways is 35 cm, up onto the plinth 10 cm
+    scene = scene_of(work, {"plinth": ("table", TABLE), "box": ("box", make_pose(translation=(0.1, 0.0, 0.05)))})
+    g = graph_of(scene, [("ground", "plinth", "supports"), ("ground", "box", "supports")])
+    out, rec = run(work, scene, g, params={"faithful": {"enabled": True, "floor_lift": lift},
+                                           "penetration_params": PHI_SCENE_SDF})
+    box = rec["objects"]["box"]
+    assert box["certificate"]["settled"]
+    lo, hi = out.get("box").world_mesh().bounds
+    if lift == 0:  # pushed across the floor out of the plinth's side (x = 0.4), by eps within a solver step
+        assert box["sdf_planar"] and "sdf_lifted" not in box and lo[2] == pytest.approx(0.0, abs=0.003)
+        assert lo[0] >= 0.4 - 1e-3
+        return
+    assert not box["sdf_planar"] and box["sdf_lifted"]["onto"] == ["plinth"]
+    assert box["certificate"]["supporters"] == ["plinth"]
+    assert box["certificate"]["supporters_kept"] and box["certificate"]["remedy"] == "none"
+    assert lo[2] == pytest.approx(0.1, abs=0.003)  # on the plinth's top
+    assert np.linalg.norm((lo + hi)[:2] / 2 - [0.1, 0.0]) < 0.01  # where it was put
 
 
 def test_paper_loop_unchanged_without_faithful(work):

@@ -24,7 +24,13 @@ import numpy as np
 
 from phiscene.assembly import faithful as fa
 from phiscene.assembly.faithful import FaithfulParams
-from phiscene.assembly.penetration import PenetrationParams, SdfBody, resolve_penetration, sdf_body
+from phiscene.assembly.penetration import (
+    PenetrationParams,
+    SdfBody,
+    resolve_penetration,
+    sdf_body,
+    vertical_clearance,
+)
 from phiscene.assembly.settle import (
     SettleParams,
     clear_overlaps,
@@ -235,10 +241,12 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
 
             t0 = time.perf_counter()
             if params.penetration:
-                planar = info is not None and _on_the_floor(obj.mesh(), pose, info, scene.ground_height,
-                                                            fp.planar_floor)
-                pose = _resolve(oid, obj.mesh(), pose, placed, scene.ground_height, pp, cache_dir, rec,
-                                scene.structure, planar, yaw_only=info is not None and bool(info["below"]))
+                if info is not None:
+                    pose = _resolve_faithful(scene, oid, pose, placed, poses, world_meshes, pp, fp, cache_dir, rec,
+                                             info)
+                else:
+                    pose = _resolve(oid, obj.mesh(), pose, placed, scene.ground_height, pp, cache_dir, rec,
+                                    scene.structure)
             else:
                 rec.update(sdf_iterations=0, sdf_initial_loss=None, sdf_final_loss=None,
                            sdf_translation=[0.0, 0.0, 0.0], sdf_context=[], sdf_grid_error=None)
@@ -423,6 +431,43 @@ def _resolve(oid: str, mesh, pose: np.ndarray, placed: list[SdfBody], ground_hei
     out = turned_about(pose, np.asarray(info["rotation"]), np.asarray(info["pivot"]))
     out[:3, 3] += x
     return out
+
+
+def _resolve_faithful(scene: Scene, oid: str, pose: np.ndarray, placed: list[SdfBody],
+                      poses: dict[str, np.ndarray], world_meshes: dict[str, object], pp: PenetrationParams,
+                      fp: FaithfulParams, cache_dir: Path, rec: dict, info: dict) -> np.ndarray:
+    """The faithful variant's SDF stage: :func:`_resolve`, horizontally only for an object on the floor alone
+    (:func:`_on_the_floor`), lifted straight up instead where that is much shorter and leaves it resting on placed
+    objects (``FaithfulParams.floor_lift``: ``info["below"]`` becomes those objects, ``rec["sdf_lifted"]`` says
+    so). ``poses`` are the placed objects' (id -> (4, 4)), ``world_meshes`` a cache of their world meshes."""
+    mesh = scene.get(oid).mesh()
+    planar = _on_the_floor(mesh, pose, info, scene.ground_height, fp.planar_floor)
+    out = _resolve(oid, mesh, pose, placed, scene.ground_height, pp, cache_dir, rec, scene.structure, planar,
+                   yaw_only=bool(info["below"]))
+    pushed = float(np.linalg.norm(out[:3, 3] - pose[:3, 3])) if rec["sdf_final_loss"] == 0.0 else math.inf
+    if not planar or fp.floor_lift <= 0 or pushed <= fp.max_slide:
+        return out
+    active = sdf_body(oid, mesh, pose, pp.n_active, pp, cache_dir)
+    lift = vertical_clearance(active, placed, scene.ground_height, pp, scene.structure,
+                              min(fp.floor_lift * pushed, pp.search_reach))
+    if lift is None:
+        return out
+    lifted = pose.copy()
+    lifted[2, 3] += lift
+    near = [q for q in rec["sdf_context"] if q in poses]
+    for q in near:
+        if q not in world_meshes:
+            world_meshes[q] = scene.get(q).mesh().copy().apply_transform(poses[q])
+    holders = fa.resting_on(transform_points(lifted, info["points"]), fa.com_world(lifted, info["com"]),
+                            {q: world_meshes[q] for q in near}, scene.ground_height, pp.eps + fp.contact_tol)
+    if not holders:
+        return out
+    rec["sdf_lifted"] = {"onto": holders, "planar_translation": [_round(v) for v in out[:3, 3] - pose[:3, 3]]}
+    rec.update(sdf_planar=False, sdf_final_loss=0.0, sdf_translation=[0.0, 0.0, _round(lift)],
+               sdf_rotation=[0.0, 0.0, 0.0])
+    info["below"] = holders
+    info["below_world"] = {q: world_meshes[q] for q in holders}
+    return lifted
 
 
 def turned_about(pose: np.ndarray, rotvec: np.ndarray, pivot: np.ndarray) -> np.ndarray:
@@ -995,9 +1040,7 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
                                          cache_dir, rec, eye)
             if params.penetration:
                 placed = [sdf_body(q, scene.get(q).mesh(), p, pp.n_context, pp, cache_dir) for q, p in context.items()]
-                planar = _on_the_floor(obj.mesh(), pose, info, scene.ground_height, fp.planar_floor)
-                pose = _resolve(oid, obj.mesh(), pose, placed, scene.ground_height, pp, cache_dir, rec,
-                                scene.structure, planar, yaw_only=bool(info["below"]))
+                pose = _resolve_faithful(scene, oid, pose, placed, context, {}, pp, fp, cache_dir, rec, info)
             new = _settle_faithful(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params, fp, info,
                                    rec, obj.com)
         closer = (fa.closeness(initial, new, info["com"], info["diag"])

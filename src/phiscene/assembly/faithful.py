@@ -153,6 +153,14 @@ class FaithfulParams(Params):
         lifts it off the floor, to topple or fall back into the overlap. Higher up, the graph is the suspect
         (a box a depth error sank into the box it is stacked on, read as standing on the floor) and the push
         is free.
+    floor_lift
+        Such an object pushed horizontally farther than ``max_slide``, or not clear at all, is lifted straight up
+        out of the overlap instead (:func:`~phiscene.assembly.penetration.vertical_clearance`; its input, on the
+        floor, inside a piece of furniture: a book a depth error sank into a shelf's bottom board, read as
+        standing on the floor, slid out of the shelf across the floor) when that lift is at most this share of
+        the horizontal push and leaves it resting on objects placed before it (:func:`resting_on`),
+        and those objects are its supporters from then on instead of the ground (``sdf_lifted`` in the
+        assembly log). 0 = off.
     joint_settle_frames
         After the loop the whole scene is simulated together until every object is at rest, at most this many
         frames (0 = off): a supporter is then tested under the load placed on it later.
@@ -291,6 +299,7 @@ class FaithfulParams(Params):
     max_turn: float = 10.0
     carry: bool = True
     planar_floor: float = 0.1
+    floor_lift: float = 0.5
     joint_settle_frames: int = 240
     joint_frames: int = 120
     joint_tol: float = 0.005
@@ -325,7 +334,7 @@ class FaithfulParams(Params):
         for key in ("max_flush_angle", "max_stable_angle", "max_candidates", "tilt_test", "tilt_frames",
                     "joint_settle_frames", "joint_frames", "joint_tol", "joint_tol_deg", "max_slide",
                     "max_slide_frac", "max_turn", "contact_tol", "retry_rolling_friction", "max_shift",
-                    "shift_directions", "onto_reach", "planar_floor", "load_frames", "reground_move"):
+                    "shift_directions", "onto_reach", "planar_floor", "floor_lift", "load_frames", "reground_move"):
             if getattr(self, key) < 0:
                 raise ValueError(f"faithful parameter {key!r} must be >= 0, got {getattr(self, key)}")
         if self.load_depth < 1:
@@ -836,6 +845,23 @@ def _under(points: np.ndarray, supporters: dict, ground_height: float, band: flo
         if not held:
             held = bool(mesh.ray.intersects_any(np.asarray(centre, dtype=float)[None], np.array([[0.0, 0.0, -1.0]]))[0])
     return (min(gaps) if gaps else None), held
+
+
+def resting_on(points: np.ndarray, com: np.ndarray, candidates: dict, ground_height: float, tol: float,
+               reach: float = 0.05) -> list[str]:
+    """The candidates an object rests on: those whose surface lies at most ``tol`` (m) under its lowest points.
+
+    ``points`` (n, 3) and ``com`` (3,) are the object's (world); ``candidates`` maps an id to its world mesh.
+    A candidate counts when :func:`vertical_gap` to it alone is at most ``tol`` (sunk in a little counts); the
+    answer is empty unless one of those lies under the centre of mass as well (the object would tip off them).
+    """
+    found, held = [], False
+    for name, mesh in candidates.items():
+        gap, under = _under(points, {name: mesh}, ground_height, reach=reach, centre=com)
+        if gap is not None and gap <= tol:
+            found.append(name)
+            held = held or under
+    return found if held else []
 
 
 def along_ray(pose: np.ndarray, com_local: np.ndarray, eye: np.ndarray, gap: float, share: float,

@@ -593,6 +593,17 @@ def min_translation_search(loss_fn: Callable, base: np.ndarray, directions: np.n
     return None
 
 
+def vertical_clearance(active: SdfBody, context: list[SdfBody], ground_height: float | None,
+                       params: PenetrationParams, planes=(), reach: float = 0.6) -> float | None:
+    """The smallest lift (m, straight up, to ``params.search_step`` then bisected) that clears ``active`` of
+    ``context``, the ground and ``planes`` by ``params.eps`` (the loss of :func:`resolve_penetration` exactly
+    zero); ``None`` when none within ``reach`` does (:func:`min_translation_search` along +z)."""
+    loss_fn = _Loss(active, context, ground_height, params.eps, params.ground_extreme_points, planes)
+    found = min_translation_search(loss_fn, np.zeros(3), np.array([[0.0, 0.0, 1.0]]), params.search_step, reach,
+                                   params.backtrack_steps)
+    return None if found is None else float(found[2])
+
+
 def minimize_hinge(loss_fn: Callable, shape: tuple[int, ...], lr: float, max_iterations: int,
                    backtrack_steps: int, optimizer: str = "adam") -> tuple[np.ndarray, dict]:
     """Adam on a translation (or several) from zero until a hinge loss is exactly zero, then back to its boundary.
