@@ -302,22 +302,26 @@ def test_post_under_a_table_top_edge_is_pushed_out_sideways_and_stands(work, rea
     assert post["certificate"]["joint_stable"] and rec["objects"]["slab"]["certificate"]["joint_stable"]
 
 
-@pytest.mark.parametrize("lift", [0.5, 0.0])
-def test_a_box_sunk_into_a_plinth_to_the_floor_is_lifted_onto_it_not_slid_out(work, lift):
-    # a plinth (80 x 80 x 10 cm) on the floor; a 10 cm box sunk into it down to the floor, 10 cm from its centre
-    # (a depth error), which the graph puts on the floor alone: out sideways is 35 cm, up onto the plinth 10 cm
-    scene = scene_of(work, {"plinth": ("table", TABLE), "box": ("box", make_pose(translation=(0.1, 0.0, 0.05)))})
+@pytest.mark.parametrize(("bottom", "lift", "lifted"), [(0.04, 0.5, True), (0.04, 0.0, False), (0.0, 0.5, False)])
+def test_a_box_sunk_into_a_plinth_near_the_floor_is_lifted_onto_it_not_slid_out(work, bottom, lift, lifted):
+    # a plinth (80 x 80 x 10 cm) on the floor; a 10 cm box sunk into it, its bottom `bottom` above the floor, 10 cm
+    # from the plinth's centre (a depth error), which the graph puts on the floor alone: out sideways is 35 cm, up
+    # onto the plinth 10 cm - bottom + eps; a lift longer than max_shift (9 cm) is not taken
+    scene = scene_of(work, {"plinth": ("table", TABLE),
+                            "box": ("box", make_pose(translation=(0.1, 0.0, bottom + 0.05)))})
     g = graph_of(scene, [("ground", "plinth", "supports"), ("ground", "box", "supports")])
     out, rec = run(work, scene, g, params={"faithful": {"enabled": True, "floor_lift": lift},
                                            "penetration_params": PHI_SCENE_SDF})
     box = rec["objects"]["box"]
     assert box["certificate"]["settled"]
     lo, hi = out.get("box").world_mesh().bounds
-    if lift == 0:  # pushed across the floor out of the plinth's side (x = 0.4), by eps within a solver step
+    if not lifted:  # pushed across the floor out of the plinth's side (x = 0.4), by eps within a solver step
         assert box["sdf_planar"] and "sdf_lifted" not in box and lo[2] == pytest.approx(0.0, abs=0.003)
         assert lo[0] >= 0.4 - 1e-3
         return
     assert not box["sdf_planar"] and box["sdf_lifted"]["onto"] == ["plinth"]
+    eps = AssemblyParams().penetration_params.eps
+    assert box["sdf_translation"][2] == pytest.approx(0.1 - bottom + eps, abs=0.002)  # straight up, clear by eps
     assert box["certificate"]["supporters"] == ["plinth"]
     assert box["certificate"]["supporters_kept"] and box["certificate"]["remedy"] == "none"
     assert lo[2] == pytest.approx(0.1, abs=0.003)  # on the plinth's top

@@ -437,9 +437,10 @@ def _resolve_faithful(scene: Scene, oid: str, pose: np.ndarray, placed: list[Sdf
                       poses: dict[str, np.ndarray], world_meshes: dict[str, object], pp: PenetrationParams,
                       fp: FaithfulParams, cache_dir: Path, rec: dict, info: dict) -> np.ndarray:
     """The faithful variant's SDF stage: :func:`_resolve`, horizontally only for an object on the floor alone
-    (:func:`_on_the_floor`), lifted straight up instead where that is much shorter and leaves it resting on placed
-    objects (``FaithfulParams.floor_lift``: ``info["below"]`` becomes those objects, ``rec["sdf_lifted"]`` says
-    so). ``poses`` are the placed objects' (id -> (4, 4)), ``world_meshes`` a cache of their world meshes."""
+    (:func:`_on_the_floor`), lifted straight up instead where that is much shorter, at most ``max_shift``, and
+    leaves it resting on placed objects (``FaithfulParams.floor_lift``: ``info["below"]`` becomes those objects,
+    ``rec["sdf_lifted"]`` says so). ``poses`` are the placed objects' (id -> (4, 4)), ``world_meshes`` a cache
+    of their world meshes."""
     mesh = scene.get(oid).mesh()
     planar = _on_the_floor(mesh, pose, info, scene.ground_height, fp.planar_floor)
     out = _resolve(oid, mesh, pose, placed, scene.ground_height, pp, cache_dir, rec, scene.structure, planar,
@@ -449,7 +450,7 @@ def _resolve_faithful(scene: Scene, oid: str, pose: np.ndarray, placed: list[Sdf
         return out
     active = sdf_body(oid, mesh, pose, pp.n_active, pp, cache_dir)
     lift = vertical_clearance(active, placed, scene.ground_height, pp, scene.structure,
-                              min(fp.floor_lift * pushed, pp.search_reach))
+                              min(fp.floor_lift * pushed, fp.max_shift, pp.search_reach))
     if lift is None:
         return out
     lifted = pose.copy()

@@ -158,7 +158,9 @@ class FaithfulParams(Params):
         out of the overlap instead (:func:`~phiscene.assembly.penetration.vertical_clearance`; its input, on the
         floor, inside a piece of furniture: a book a depth error sank into a shelf's bottom board, read as
         standing on the floor, slid out of the shelf across the floor) when that lift is at most this share of
-        the horizontal push and leaves it resting on objects placed before it (:func:`resting_on`),
+        the horizontal push and at most ``max_shift`` (an office chair tucked under a conference table, wedged in
+        its top, is not put on the table, 53 cm up) and leaves it resting on objects placed before it
+        (:func:`resting_on`),
         and those objects are its supporters from then on instead of the ground (``sdf_lifted`` in the
         assembly log). 0 = off.
     joint_settle_frames
