@@ -24,6 +24,7 @@ from phiscene.assembly.faithful import (
     gross_failures,
     resting_candidates,
     resting_normals,
+    resting_on,
 )
 from phiscene.meshes import save_mesh
 from phiscene.metrics.pose import pose_metrics
@@ -326,6 +327,18 @@ def test_a_box_sunk_into_a_plinth_near_the_floor_is_lifted_onto_it_not_slid_out(
     assert box["certificate"]["supporters_kept"] and box["certificate"]["remedy"] == "none"
     assert lo[2] == pytest.approx(0.1, abs=0.003)  # on the plinth's top
     assert np.linalg.norm((lo + hi)[:2] / 2 - [0.1, 0.0]) < 0.01  # where it was put
+
+
+@pytest.mark.parametrize(("height", "x", "found"), [(0.105, 0.0, ["plinth"]), (0.12, 0.0, []), (0.105, 0.44, [])])
+def test_resting_on_is_the_surface_within_tol_under_the_lowest_points_and_the_centre(height, x, found):
+    # a plinth's top at z = 0.1, from x = -0.4 to 0.4; a 10 cm square of points `height` up, centred at `x`
+    plinth = trimesh.creation.box((0.8, 0.8, 0.1))
+    plinth.apply_translation((0.0, 0.0, 0.05))
+    g = np.linspace(-0.05, 0.05, 5)
+    pts = np.array([(x + a, b, height) for a in g for b in g] + [(x, 0.0, height + 0.1)])
+    com = np.array([x, 0.0, height + 0.05])
+    # 5 mm above the top is within 9 mm; 2 cm is not; half over the edge with the centre beyond it does not rest
+    assert resting_on(pts, com, {"plinth": plinth}, 0.0, 0.009) == found
 
 
 def test_paper_loop_unchanged_without_faithful(work):

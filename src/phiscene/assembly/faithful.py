@@ -160,9 +160,8 @@ class FaithfulParams(Params):
         standing on the floor, slid out of the shelf across the floor) when that lift is at most this share of
         the horizontal push and at most ``max_shift`` (an office chair tucked under a conference table, wedged in
         its top, is not put on the table, 53 cm up) and leaves it resting on objects placed before it
-        (:func:`resting_on`),
-        and those objects are its supporters from then on instead of the ground (``sdf_lifted`` in the
-        assembly log). 0 = off.
+        (:func:`resting_on`), and those objects are its supporters from then on instead of the ground
+        (``sdf_lifted`` in the assembly log). 0 = off.
     joint_settle_frames
         After the loop the whole scene is simulated together until every object is at rest, at most this many
         frames (0 = off): a supporter is then tested under the load placed on it later.
