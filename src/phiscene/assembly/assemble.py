@@ -455,20 +455,25 @@ def _resolve_faithful(scene: Scene, oid: str, pose: np.ndarray, placed: list[Sdf
         return out
     lifted = pose.copy()
     lifted[2, 3] += lift
-    near = [q for q in rec["sdf_context"] if q in poses]
-    for q in near:
-        if q not in world_meshes:
-            world_meshes[q] = scene.get(q).mesh().copy().apply_transform(poses[q])
-    holders = fa.resting_on(transform_points(lifted, info["points"]), fa.com_world(lifted, info["com"]),
-                            {q: world_meshes[q] for q in near}, scene.ground_height, pp.eps + fp.contact_tol)
+    near = {q: _placed_mesh(scene, q, poses, world_meshes) for q in rec["sdf_context"] if q in poses}
+    holders = fa.resting_on(transform_points(lifted, info["points"]), fa.com_world(lifted, info["com"]), near,
+                            scene.ground_height, pp.eps + fp.contact_tol)
     if not holders:
         return out
     rec["sdf_lifted"] = {"onto": holders, "planar_translation": [_round(v) for v in out[:3, 3] - pose[:3, 3]]}
     rec.update(sdf_planar=False, sdf_final_loss=0.0, sdf_translation=[0.0, 0.0, _round(lift)],
                sdf_rotation=[0.0, 0.0, 0.0])
     info["below"] = holders
-    info["below_world"] = {q: world_meshes[q] for q in holders}
+    info["below_world"] = {q: near[q] for q in holders}
     return lifted
+
+
+def _placed_mesh(scene: Scene, oid: str, poses: dict[str, np.ndarray], world_meshes: dict[str, object]):
+    """The world mesh (trimesh) of the placed object ``oid`` at its pose in ``poses``, kept in ``world_meshes``
+    (id -> mesh) so that its spatial index is built once per placed pose."""
+    if oid not in world_meshes:
+        world_meshes[oid] = scene.get(oid).mesh().copy().apply_transform(poses[oid])
+    return world_meshes[oid]
 
 
 def turned_about(pose: np.ndarray, rotvec: np.ndarray, pivot: np.ndarray) -> np.ndarray:
@@ -552,9 +557,7 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
         if p == "ground":
             parents_world[p] = None
         elif p in poses:
-            if p not in world_meshes:
-                world_meshes[p] = scene.get(p).mesh().copy().apply_transform(poses[p])
-            parents_world[p] = world_meshes[p]
+            parents_world[p] = _placed_mesh(scene, p, poses, world_meshes)
     world_mesh = hull.copy().apply_transform(np.asarray(obj.pose, dtype=float))
     up = fa.support_normal(world_mesh, parents_world)
     flushable = not leaning and bool(below)
