@@ -167,3 +167,25 @@ def test_inner_face_masks_are_kept_on_disk_and_a_bad_file_is_recomputed(tmp_path
     finally:
         solid.use_disk_cache(None)
         solid._CACHE.clear()
+
+
+def test_a_solid_that_cannot_cover_the_mesh_is_not_decomposed(monkeypatch):
+    """A double-walled ball with a fin 1 mm thick reaching 8 cm out of it: the solid's grid (40 cells across, 7 mm
+    cells) loses the fin, so the fin's tip lies about 8 cm outside the convex hull of the solid's surface, and no
+    decomposition of that surface can cover it (tolerance 2 % of the diagonal, 7 mm). The solid route is given up
+    before the decomposition runs on it: the decomposition (here a stand-in returning the convex hull of what it
+    is given) runs once, on the mesh's outer shell."""
+    import phiscene.proxies as proxies
+
+    ball, _ = double_wall(radius=0.1, wall=0.004, subdivisions=3)
+    fin = trimesh.creation.box((0.16, 0.001, 0.06))
+    fin.apply_translation((0.1, 0.0, 0.0))  # from the ball's centre out to x = 0.18
+    mesh = trimesh.util.concatenate([ball, fin])
+    shell = outer_shell(mesh)
+    assert solid_surface(shell, ProxyParams().solid_resolution).bounds[1, 0] < 0.11  # the grid lost the fin
+    calls = []
+    monkeypatch.setattr(proxies, "_decompose", lambda m, p: calls.append(len(m.faces)) or [m.convex_hull.vertices])
+    hulls, route = decompose_route(mesh, ProxyParams(convex_tolerance=0.0))
+    assert route == "decomposed" and calls == [len(shell.faces)]
+    _, outside, _ = fidelity(mesh, hulls)
+    assert outside <= ProxyParams().solid_tolerance * float(np.linalg.norm(mesh.extents))

@@ -223,8 +223,9 @@ def decompose_route(mesh: trimesh.Trimesh, params: ProxyParams) -> tuple[list[np
     if params.convex_tolerance > 0 and hull_excess(work, seed=params.seed) <= params.convex_tolerance:
         return fit_to_mesh([mesh.convex_hull.vertices], mesh, params.max_hull_vertices), "single_hull"
     if params.solid_resolution and params.backend == "coacd" and shell is not mesh:
-        hulls = fit_to_mesh(_decompose_solid(shell, params), mesh, params.max_hull_vertices)
-        if hulls and max_outside(mesh, hulls, seed=params.seed) <= params.solid_tolerance * _diagonal(mesh):
+        tol = params.solid_tolerance * _diagonal(mesh)
+        hulls = fit_to_mesh(_decompose_solid(shell, mesh, tol, params), mesh, params.max_hull_vertices)
+        if hulls and max_outside(mesh, hulls, seed=params.seed) <= tol:
             return hulls, "solid"
         log.info("solid route lost part of the mesh; decomposing the surface instead")
     return fit_to_mesh(_decompose(work, params), mesh, params.max_hull_vertices), "decomposed"
@@ -334,12 +335,21 @@ def _diagonal(mesh: trimesh.Trimesh) -> float:
     return float(np.linalg.norm(mesh.extents))
 
 
-def _decompose_solid(shell: trimesh.Trimesh, params: ProxyParams) -> list[np.ndarray]:
-    """CoACD on the closed surface of a hollow mesh's solid (no manifold preprocessing needed)."""
+def _decompose_solid(shell: trimesh.Trimesh, mesh: trimesh.Trimesh, tol: float,
+                     params: ProxyParams) -> list[np.ndarray]:
+    """CoACD on the closed surface of a hollow mesh's solid (no manifold preprocessing needed).
+
+    Empty when that surface is not closed, or when it cannot cover ``mesh`` within ``tol`` (m): every piece CoACD
+    cuts from the surface lies in the surface's convex hull, so a mesh point farther than ``tol`` outside that hull
+    (a plant's leaves, a fan's blades, a curtain's folds lost by the grid) stays uncovered whatever the
+    decomposition, and the decomposition (seconds) is not run.
+    """
     from phiscene.solid import solid_surface
 
     surface = solid_surface(shell, params.solid_resolution)
     if len(surface.faces) < 4 or not surface.is_watertight:
+        return []
+    if max_outside(mesh, [np.asarray(surface.vertices, dtype=float)], seed=params.seed) > tol:
         return []
     return _decompose(surface, params)
 
