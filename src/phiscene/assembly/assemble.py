@@ -685,8 +685,9 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         robust = True  # tested only where it decides: a settled result in place (the fallback: below)
         tested = result.settled and in_place and fp.tilt_test > 0 and not info["leaning"]  # leaning: friction
         if tested:
-            robust = holds_when_tilted(world, oid, fp.tilt_test, fp.tilt_frames, fp.joint_tol, fp.joint_tol_deg)
-            frames += 4 * fp.tilt_frames
+            robust, spent = holds_when_tilted(world, oid, fp.tilt_test, fp.tilt_frames, fp.joint_tol,
+                                              fp.joint_tol_deg, sp)
+            frames += spent
         gave: list[str] = []  # the placed objects it touches (and their supporters), released under it, hold it
         if result.settled and in_place and robust and fp.load_frames > 0:
             carriers = load_carriers(world, oid, near, info["fixed"], fp.contact_tol, fp.load_depth)
@@ -716,8 +717,9 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
             mass(t["com"], t["base"])
             world.set_pose(oid, t["result"].pose)
             t["tilt_tested"] = True
-            t["robust"] = holds_when_tilted(world, oid, fp.tilt_test, fp.tilt_frames, fp.joint_tol, fp.joint_tol_deg)
-            t["frames"] += 4 * fp.tilt_frames
+            t["robust"], spent = holds_when_tilted(world, oid, fp.tilt_test, fp.tilt_frames, fp.joint_tol,
+                                                   fp.joint_tol_deg, sp)
+            t["frames"] += spent
             if not t["robust"]:
                 t["why"] = "; ".join(w for w in (t["why"], f"marginal: tips when tilted {fp.tilt_test:g} deg") if w)
         return t["robust"]

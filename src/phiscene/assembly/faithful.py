@@ -182,7 +182,8 @@ class FaithfulParams(Params):
         and topples when the whole scene is released. 0 = off. Not for objects that lean on something: friction
         at two contacts holds them, and a tilt tests that margin rather than their balance.
     tilt_frames
-        Frames simulated per tilt direction.
+        Frames simulated per tilt direction, at most: a direction ends once the object is past the tolerance, or
+        within it and at rest by the settling criterion.
     load_frames
         A settled result that passed the tilt test is accepted only if the placed objects it touches, released
         under it for this many frames, hold it (:func:`~phiscene.assembly.settle.gives_way`: nothing moves more
