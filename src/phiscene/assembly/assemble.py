@@ -692,8 +692,8 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         if result.settled and in_place and robust and fp.load_frames > 0:
             carriers = load_carriers(world, oid, near, info["fixed"], fp.contact_tol, fp.load_depth)
             if carriers:
-                gave = gives_way(world, oid, carriers, fp.load_frames, fp.joint_tol, fp.joint_tol_deg)
-                frames += fp.load_frames
+                gave, spent = gives_way(world, oid, carriers, fp.load_frames, fp.joint_tol, fp.joint_tol_deg, sp)
+                frames += spent
         whys = ["" if ok else f"moved {moved:.3f} m / {turned:.1f} deg",
                 f"lost supporters {lost}" if lost else "", "" if result.settled else "not settled",
                 "" if robust else f"marginal: tips when tilted {fp.tilt_test:g} deg",
@@ -848,7 +848,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         world.set_static(oid)
         carriers = load_carriers(world, oid, near, info["fixed"], fp.contact_tol, fp.load_depth)
         if near and far(kept) < far(best["result"].pose) and not (
-                carriers and gives_way(world, oid, carriers, fp.load_frames, fp.joint_tol, fp.joint_tol_deg)):
+                carriers and gives_way(world, oid, carriers, fp.load_frames, fp.joint_tol, fp.joint_tol_deg, sp)[0]):
             rec["touching"] = near
             moved, turned = window_motion(pose, kept)
             reason = "; ".join(f"{t['label']}: {t['why']}" for t in tried)

@@ -137,6 +137,10 @@ class _Window:
     def step(self) -> bool:
         """Advance one frame; return whether the criterion holds now."""
         self.world.step_frames(1)
+        return self.observe()
+
+    def observe(self) -> bool:
+        """Record the pose after a frame the world advanced; return whether the criterion holds now."""
         self.frames += 1
         self.poses.append(self.world.pose(self.name))
         return self.met()
@@ -424,7 +428,7 @@ def load_carriers(world: BulletWorld, name: str, near: list[str], fixed, tol: fl
 
 
 def gives_way(world: BulletWorld, name: str, carriers: list[str], frames: int, tol_pos: float,
-              tol_rot_deg: float) -> list[str]:
+              tol_rot_deg: float, rest: SettleParams | None = None) -> tuple[list[str], int]:
     """Which of ``name`` and its ``carriers`` move when the carriers, frozen so far, are released under it.
 
     Sequential settling tests an object against a frozen context: a book leaning on a box, a plank on the edge of
@@ -446,10 +450,16 @@ def gives_way(world: BulletWorld, name: str, carriers: list[str], frames: int, t
         Frames simulated.
     tol_pos, tol_rot_deg
         How far a body may end from its pose (m, deg).
+    rest
+        The settling criterion: with it, the run ends early once every body is at rest by it (nothing moves
+        any more; ``None``: always ``frames`` frames).
 
     Returns
     -------
-    The bodies that moved, ``name`` first when it did (empty: the carriers hold it).
+    moved
+        The bodies that moved, ``name`` first when it did (empty: the carriers hold it).
+    frames
+        Frames simulated.
     """
     bodies = [name, *carriers]
     start = {b: world.pose(b) for b in bodies}
@@ -459,7 +469,17 @@ def gives_way(world: BulletWorld, name: str, carriers: list[str], frames: int, t
             world.set_dynamic(c)
         for b in bodies:  # released as in a new world: not on the contacts Bullet kept of their rest
             world.forget_contacts(b)
-        world.step_frames(frames)
+        spent = frames
+        if rest is None:
+            world.step_frames(frames)
+        else:
+            windows = [_Window(world, b, rest) for b in bodies]
+            spent = 0
+            while spent < frames:
+                world.step_frames(1)
+                spent += 1
+                if all([w.observe() for w in windows]):
+                    break
         for b in bodies:
             moved, turned = window_motion(start[b], world.pose(b))
             if moved > tol_pos or np.degrees(turned) > tol_rot_deg:
@@ -469,4 +489,4 @@ def gives_way(world: BulletWorld, name: str, carriers: list[str], frames: int, t
             world.set_static(c)
         for b in bodies:
             world.set_pose(b, start[b])
-    return moved_out
+    return moved_out, spent
