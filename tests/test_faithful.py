@@ -46,7 +46,8 @@ def work(tmp_path_factory):
     meshes = {"table": trimesh.creation.box((0.8, 0.8, 0.1)), "box": trimesh.creation.box((0.1, 0.1, 0.1)),
               "block": trimesh.creation.box((0.2, 0.1, 0.05)), "plank": trimesh.creation.box((0.5, 0.05, 0.02)),
               "fruit": fruit, "slab": trimesh.creation.box((0.3, 0.3, 0.04)),
-              "column": trimesh.creation.box((0.1, 0.1, 0.3)), "book": trimesh.creation.box((0.03, 0.15, 0.25))}
+              "column": trimesh.creation.box((0.1, 0.1, 0.3)), "book": trimesh.creation.box((0.03, 0.15, 0.25)),
+              "disc": trimesh.creation.cylinder(radius=0.08, height=0.02, sections=48)}
     return {"root": root, "cache": root / "cache",
             "meshes": {n: save_mesh(m, root / f"{n}.obj") for n, m in meshes.items()}}
 
@@ -327,6 +328,24 @@ def test_a_box_sunk_into_a_plinth_near_the_floor_is_lifted_onto_it_not_slid_out(
     assert box["certificate"]["supporters_kept"] and box["certificate"]["remedy"] == "none"
     assert lo[2] == pytest.approx(0.1, abs=0.003)  # on the plinth's top
     assert np.linalg.norm((lo + hi)[:2] / 2 - [0.1, 0.0]) < 0.01  # where it was put
+
+
+def test_a_block_sunk_into_a_round_plate_is_lifted_onto_it_though_its_corners_overhang(work):
+    # a round plate (16 cm across, 2 cm high) on the floor; a 20 x 10 x 5 cm block sunk into it down to the floor,
+    # centred on it, which the graph puts on the floor alone. Its corners (11.2 cm from the centre) overhang the
+    # plate: only its bottom's middle rests on it. Out sideways is 13 cm, up onto the plate 2 cm + eps
+    scene = scene_of(work, {"plate": ("disc", make_pose(translation=(0.0, 0.0, 0.01))),
+                            "block": ("block", make_pose(translation=(0.0, 0.0, 0.025)))})
+    g = graph_of(scene, [("ground", "plate", "supports"), ("ground", "block", "supports")])
+    out, rec = run(work, scene, g, params={"faithful": {"enabled": True}, "penetration_params": PHI_SCENE_SDF})
+    block = rec["objects"]["block"]
+    assert block["sdf_lifted"]["onto"] == ["plate"]
+    eps = AssemblyParams().penetration_params.eps
+    assert block["sdf_translation"][2] == pytest.approx(0.02 + eps, abs=0.002)  # straight up, clear by eps
+    assert block["certificate"]["supporters"] == ["plate"] and block["certificate"]["settled"]
+    lo, hi = out.get("block").world_mesh().bounds
+    assert lo[2] == pytest.approx(0.02, abs=0.003)  # on the plate's top
+    assert np.linalg.norm((lo + hi)[:2] / 2) < 0.01  # where it was put
 
 
 @pytest.mark.parametrize(("height", "x", "found"), [(0.105, 0.0, ["plinth"]), (0.12, 0.0, []), (0.105, 0.44, [])])

@@ -42,6 +42,7 @@ from phiscene.assembly.settle import (
     window_motion,
 )
 from phiscene.errors import InputError
+from phiscene.meshes import sample_surface
 from phiscene.params import Params
 from phiscene.proxies import Proxy, check_proxies, with_base, with_bases
 from phiscene.scene import Scene
@@ -456,7 +457,8 @@ def _resolve_faithful(scene: Scene, oid: str, pose: np.ndarray, placed: list[Sdf
     lifted = pose.copy()
     lifted[2, 3] += lift
     near = {q: _placed_mesh(scene, q, poses, world_meshes) for q in rec["sdf_context"] if q in poses}
-    holders = fa.resting_on(transform_points(lifted, info["points"]), fa.com_world(lifted, info["com"]), near,
+    bottom = np.vstack([info["points"], sample_surface(mesh, fa.RESTING_SAMPLES, pp.seed)])
+    holders = fa.resting_on(transform_points(lifted, bottom), fa.com_world(lifted, info["com"]), near,
                             scene.ground_height, pp.eps + fp.contact_tol)
     if not holders:
         return out

@@ -106,6 +106,11 @@ BELOW = ("supports", "contains")
 #: Upward surface samples per placed object for the remedy ``onto`` (:func:`upward_samples`).
 ONTO_SAMPLES = 3000
 
+#: Surface samples of an object's mesh added to its shape's corners when :func:`resting_on` looks for what it rests
+#: on (``FaithfulParams.floor_lift``): a box on a round plate overhangs it at every corner, and its hull's corners
+#: alone find nothing under them.
+RESTING_SAMPLES = 1024
+
 #: Remedy ``base`` (:func:`flat_base`): thicknesses of the band of an object's height, above its lowest point,
 #: that is completed flat, thinnest first (shares of the height). The thinnest keeps the mesh closest to its
 #: supporter; the thickest is 10 %: a base completed flat through more of the object is no longer its bottom.
