@@ -184,3 +184,32 @@ def test_the_nearly_convex_decision_does_not_depend_on_the_units_of_the_mesh():
     params = ProxyParams(backend="coacd", max_faces=2000)
     (ha, ra), (hb, rb) = decompose_route(pear, params), decompose_route(scaled, params)
     assert ra == rb and len(ha) == len(hb)
+
+
+def test_a_decimation_that_loses_part_of_the_mesh_is_redone_with_more_faces(monkeypatch):
+    """Two 10 cm cubes 50 cm apart (centres), as one mesh of 6,144 faces; a decimation (stand-in) that merges the
+    second cube away below 8,000 faces. The farthest sample of the lost cube is at most sqrt(0.5^2 + 2 * 0.1^2)
+    = 0.52 m and at least 0.3 m from the kept one (the oracle of decimation_loss); with a 2 cm tolerance the
+    decimation is redone at 4 x 2000 = 8000 faces, where nothing is lost, and the mesh (under that budget) is kept
+    whole. With tolerance 0 it is decimated once."""
+    import phiscene.proxies as proxies
+
+    a = trimesh.creation.box((0.1, 0.1, 0.1)).subdivide().subdivide().subdivide().subdivide()
+    b = a.copy()
+    b.apply_translation((0.5, 0.0, 0.0))
+    mesh = trimesh.util.concatenate([a, b])
+    assert len(mesh.faces) == 6144
+    budgets = []
+
+    def fake(m, max_faces):
+        budgets.append(max_faces)
+        if len(m.faces) <= max_faces:
+            return m
+        return a if max_faces < 8000 else m
+
+    monkeypatch.setattr(proxies, "decimated_unit_free", fake)
+    assert 0.3 <= proxies.decimation_loss(mesh, a) <= 0.52
+    assert proxies.decimation_loss(mesh, mesh) == 0.0
+    assert proxies.decimated_faithfully(mesh, 2000, 0.02) is mesh and budgets == [2000, 8000]
+    budgets.clear()
+    assert proxies.decimated_faithfully(mesh, 2000, 0.0) is a and budgets == [2000]
