@@ -256,11 +256,12 @@ def decompose_route(mesh: trimesh.Trimesh, params: ProxyParams) -> tuple[list[np
     if params.backend == "convex":
         return [np.asarray(mesh.convex_hull.vertices, dtype=float)], "convex"
     shell = outer_shell(mesh)
-    work = decimated_faithfully(shell, params.max_faces, params.decimation_tolerance * _diagonal(mesh), params.seed)
+    diagonal = _diagonal(mesh)
+    work = decimated_faithfully(shell, params.max_faces, params.decimation_tolerance * diagonal, params.seed)
     if params.convex_tolerance > 0 and hull_excess(work, seed=params.seed) <= params.convex_tolerance:
         return fit_to_mesh([mesh.convex_hull.vertices], mesh, params.max_hull_vertices), "single_hull"
     if params.solid_resolution and params.backend == "coacd" and shell is not mesh:
-        tol = params.solid_tolerance * _diagonal(mesh)
+        tol = params.solid_tolerance * diagonal
         hulls = fit_to_mesh(_decompose_solid(shell, mesh, tol, params), mesh, params.max_hull_vertices)
         if hulls and max_outside(mesh, hulls, seed=params.seed) <= tol:
             return hulls, "solid"

@@ -126,6 +126,12 @@ def window_motion(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
     return float(np.linalg.norm(tb - ta)), rotation_angle(Ra, Rb)
 
 
+def moved_past(a: np.ndarray, b: np.ndarray, tol_pos: float, tol_rot_deg: float) -> bool:
+    """Whether pose ``b`` (4, 4) lies farther than ``tol_pos`` (m) or ``tol_rot_deg`` from pose ``a``."""
+    moved, turned = window_motion(a, b)
+    return moved > tol_pos or np.degrees(turned) > tol_rot_deg
+
+
 class _Window:
     """The last ``w + 1`` poses of one body and the window criterion on them."""
 
@@ -260,11 +266,6 @@ def holds_when_tilted(world: BulletWorld, name: str, tilt_deg: float, frames: in
     """
     start = world.pose(name)
     s, c = np.sin(np.radians(tilt_deg)), np.cos(np.radians(tilt_deg))
-
-    def away(pose: np.ndarray) -> bool:
-        moved, turned = window_motion(start, pose)
-        return moved > tol_pos or np.degrees(turned) > tol_rot_deg
-
     held, spent = True, 0
     try:
         for dx, dy in ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)):
@@ -275,10 +276,11 @@ def holds_when_tilted(world: BulletWorld, name: str, tilt_deg: float, frames: in
                 spent += frames
             else:
                 win = _Window(world, name, rest)
-                while win.frames < frames and not (win.step() or away(win.poses[-1])):
-                    pass
+                while win.frames < frames:
+                    if win.step() or moved_past(start, win.poses[-1], tol_pos, tol_rot_deg):
+                        break
                 spent += win.frames
-            if away(world.pose(name)):
+            if moved_past(start, world.pose(name), tol_pos, tol_rot_deg):
                 held = False
                 break
     finally:
@@ -463,15 +465,14 @@ def gives_way(world: BulletWorld, name: str, carriers: list[str], frames: int, t
     """
     bodies = [name, *carriers]
     start = {b: world.pose(b) for b in bodies}
-    moved_out: list[str] = []
     try:
         for c in carriers:
             world.set_dynamic(c)
         for b in bodies:  # released as in a new world: not on the contacts Bullet kept of their rest
             world.forget_contacts(b)
-        spent = frames
         if rest is None:
             world.step_frames(frames)
+            spent = frames
         else:
             windows = [_Window(world, b, rest) for b in bodies]
             spent = 0
@@ -480,10 +481,7 @@ def gives_way(world: BulletWorld, name: str, carriers: list[str], frames: int, t
                 spent += 1
                 if all([w.observe() for w in windows]):
                     break
-        for b in bodies:
-            moved, turned = window_motion(start[b], world.pose(b))
-            if moved > tol_pos or np.degrees(turned) > tol_rot_deg:
-                moved_out.append(b)
+        moved_out = [b for b in bodies if moved_past(start[b], world.pose(b), tol_pos, tol_rot_deg)]
     finally:
         for c in carriers:
             world.set_static(c)
