@@ -26,7 +26,12 @@ from phiscene.assembly import (
     sdf_body,
     settle_object,
 )
-from phiscene.assembly.penetration import AdamState, min_translation_search, minimize_hinge, search_directions
+from phiscene.assembly.penetration import (
+    AdamState,
+    min_translation_search,
+    minimize_hinge,
+    search_directions,
+)
 from phiscene.errors import InputError
 from phiscene.inertia import rigid_props
 from phiscene.meshes import mesh_hash
@@ -87,7 +92,7 @@ def test_grid_matches_exact_sdf_near_surface(mesh, max_err, mean_err):
 
 def test_grid_exact_near_faces_and_lower_bound_outside():
     mesh = trimesh.creation.box((0.2, 0.2, 0.2))
-    grid = sdf_grid(mesh, GridParams(), None)
+    grid = sdf_grid(mesh, GridParams(exact_margin=None), None)  # exact at every node
     # over a face centre the SDF is linear: trilinear interpolation is exact, inside and outside
     z = np.linspace(-0.05, 0.05, 41)
     pts = np.column_stack([np.full_like(z, 0.01), np.full_like(z, -0.02), 0.1 + z])
@@ -100,6 +105,55 @@ def test_grid_exact_near_faces_and_lower_bound_outside():
     assert got[0] == pytest.approx(2.9, abs=1e-9)
     line = np.column_stack([np.linspace(0.5, 4.0, 8), np.zeros(8), np.zeros(8)])
     assert np.all(np.diff(grid.query_numpy(line)) > 0.49)
+
+
+def _open_box() -> trimesh.Trimesh:
+    """A 0.4 m box without its top: inside it the winding number crosses 1/2 far from every wall."""
+    box = trimesh.creation.box((0.4, 0.4, 0.4))
+    keep = box.face_normals[:, 2] < 0.5
+    return trimesh.Trimesh(box.vertices, box.faces[keep], process=False)
+
+
+@pytest.mark.parametrize("mesh", [trimesh.creation.icosphere(3, 0.1), trimesh.creation.annulus(0.05, 0.12, 0.1),
+                                  _open_box()], ids=["sphere", "ring", "open box"])
+def test_narrow_band_grid_reads_as_the_exact_grid_to_every_hinge(mesh):
+    exact = sdf_grid(mesh, GridParams(exact_margin=None), None)
+    band = sdf_grid(mesh, GridParams(), None)  # exact_margin 0.02
+    diff = exact.values != band.values
+    assert diff.mean() > 0.2  # the band does skip nodes
+    # only nodes outside and farther than the band differ, and they keep a lower bound beyond it
+    assert np.all(exact.values[diff] > 0.02 + band.cell_diagonal)
+    assert np.all(band.values[diff] <= exact.values[diff] + 1e-12)
+    assert np.all(band.values[diff] > 0.02 + band.cell_diagonal)
+    # every hinge relu(eps - sdf) with eps <= 0.02 has the same value and gradient, in and around the box
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(exact.lo - 0.1, exact.hi + 0.1, size=(20000, 3))
+    for eps in (0.0, 0.005, 0.02):
+        grads, losses = [], []
+        for g in (exact, band):
+            p = torch.tensor(pts, requires_grad=True)
+            loss = torch.relu(eps - g.query_local(p))
+            loss.sum().backward()
+            losses.append(loss.detach().numpy())
+            grads.append(p.grad.numpy())
+        assert np.array_equal(losses[0], losses[1]) and np.array_equal(grads[0], grads[1])
+        assert (losses[0] > 0).any()
+
+
+def test_grid_margin_follows_the_callers_clearance():
+    mesh = trimesh.creation.icosphere(3, 0.1)
+    exact = sdf_grid(mesh, GridParams(exact_margin=None), None)
+    wide = sdf_grid(mesh, GridParams(), None, clearance=0.06)  # e.g. eps 6 mm on a mesh scaled by 0.1
+    assert wide.params_hash == GridParams(exact_margin=0.06).digest()
+    assert np.array_equal(wide.values[exact.values <= 0.06 + wide.cell_diagonal],
+                          exact.values[exact.values <= 0.06 + wide.cell_diagonal])
+    assert sdf_grid(mesh, GridParams(), None, clearance=0.01).params_hash == GridParams().digest()
+    body = sdf_body("s", mesh, make_pose(np.eye(3), (0, 0, 0), scale=0.1), 64, PenetrationParams(eps=0.006), None)
+    assert body.grid.params_hash == wide.params_hash
+    with pytest.raises(ValueError, match="exact_margin"):
+        GridParams.from_dict({"exact_margin": 0.01})  # below error_band: the error would not be the exact grid's
+    with pytest.raises(ValueError, match="coarse_stride"):
+        GridParams.from_dict({"coarse_stride": 1})
 
 
 def test_grid_gradient_is_face_normal():

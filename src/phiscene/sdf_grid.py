@@ -7,7 +7,8 @@ get cells of the same size, refined (anisotropic cells) so that at least
 ``cells_across`` cells span the mesh along every axis (thin plates and
 planks keep a resolved interior), with ``min_points``..``max_points`` points
 per axis. Node values are exact signed distances
-(:func:`phiscene.sdf.signed_distance`, negative inside).
+(:func:`phiscene.sdf.signed_distance`, negative inside) within ``exact_margin`` plus one cell diagonal of the
+surface and everywhere inside; farther out they are lower bounds that stay beyond that band (below).
 
 Lookup (:func:`grid_lookup`) is trilinear interpolation with
 ``torch.nn.functional.grid_sample`` (``align_corners=True``,
@@ -15,13 +16,29 @@ Lookup (:func:`grid_lookup`) is trilinear interpolation with
 outside the grid box gets the value at its projection onto the box plus its
 distance to the box, so the value keeps growing away from the object. The
 interpolated value is a convex combination of node values, each within one
-cell diagonal of the query point, so (SDFs being 1-Lipschitz)
+cell diagonal of the query point, so with exact node values (SDFs being 1-Lipschitz; the default grid's narrow
+band keeps this within ``exact_margin`` of the surface, below)
 ``|lookup - exact| <= cell diagonal`` inside the box, ``lookup >= exact -
 cell diagonal`` outside it (a lower bound that is safe for pruning and
 penetration tests), and the error is zero where the SDF is linear (near flat
 faces, away from edges).
 Measured errors near the surface are stored with every grid
 (:attr:`SdfGrid.error`).
+
+Narrow band. Every consumer of a grid asks one question of it: how far inside, or how much closer than a
+clearance ``eps``, a point is (the hinge ``relu(eps - sdf)`` of the penetration solves). Exact distances of the
+nodes far outside the mesh, most of a grid's box, cost most of a build and change no answer. So a grid is built
+in two passes: the exact distance to the surface at every ``coarse_stride``-th node along each axis, then the
+exact SDF at the nodes whose Lipschitz lower bound from their nearest coarse node, ``d(c) - |x - c|``, is within
+``band = exact_margin + cell diagonal``, at the nodes inside the mesh (exact winding-number sign) and at their
+neighbours; the others, outside, keep that lower bound (which exceeds ``band``). A cell with a bounded corner
+then has every corner outside and at least ``band - cell diagonal = exact_margin`` from the surface (distances
+are 1-Lipschitz), so its lookup is at least ``exact_margin`` both ways, and ``relu(eps - lookup)`` and its
+gradient are those of the fully exact grid wherever ``eps <= exact_margin`` (local units: :func:`sdf_grid`
+raises the margin for a caller that needs more). In short: ``lookup <= exact + cell diagonal`` everywhere in the
+box, and ``|lookup - exact| <= cell diagonal`` wherever ``exact <= exact_margin``. On the 11 30k-face meshes of a
+real table-top scene (``custom_viga``), 16-65 % of the nodes are bounded and the grids' signed distances take
+3.6 s instead of 5.6 (one core); the 5 ``real`` and 20 ``clutter`` scenes ground to the same poses to the bit.
 
 Grids are cached in memory and on disk under
 ``<cache_dir>/sdf_grids/<mesh hash>-<params hash>.npz`` (atomic writes; the
@@ -35,7 +52,7 @@ import hashlib
 import json
 import logging
 from collections import OrderedDict
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -49,7 +66,7 @@ from phiscene.transforms import decompose
 log = logging.getLogger(__name__)
 
 #: Bump when grid construction changes in a way that changes values.
-SDF_GRID_VERSION = 2
+SDF_GRID_VERSION = 3
 
 #: In-memory grids by (mesh hash, params hash), least recently used evicted beyond ``_MEMORY_SIZE``.
 _MEMORY: "OrderedDict[tuple[str, str], SdfGrid]" = OrderedDict()
@@ -84,6 +101,12 @@ class GridParams(Params):
         signed distance costs time in proportion. The grid error is still measured against the full mesh
         (``SdfGrid.error``), so the decimation's cost in accuracy is recorded (measured on a 30k-face jug: max
         error 6.7 mm against 6.4 mm for the full mesh, build 1.5 s against 2.8 s).
+    exact_margin
+        Node values are exact within this distance (plus one cell diagonal) of the surface and inside; farther
+        nodes keep a lower bound beyond it (module notes: "Narrow band"). At least ``error_band``, so that the
+        recorded error is the exact grid's. ``None``: exact at every node.
+    coarse_stride
+        Node stride of the narrow band's first, exact pass along each axis.
     """
 
     _label = "SDF grid parameters"
@@ -98,6 +121,8 @@ class GridParams(Params):
     error_samples: int = 4096
     seed: int = 0
     max_faces: int = 5000
+    exact_margin: float | None = 0.02
+    coarse_stride: int = 4
 
     def check(self) -> None:
         """Reject too few grid points or negative padding (``ValueError``)."""
@@ -109,6 +134,11 @@ class GridParams(Params):
             raise ValueError(f"SDF grid padding must be >= 0, got {self.pad_fraction}, {self.pad_abs}")
         if self.max_faces < 0:
             raise ValueError(f"SDF grid max_faces must be >= 0, got {self.max_faces}")
+        if self.exact_margin is not None and not self.exact_margin >= self.error_band:
+            raise ValueError(f"SDF grid exact_margin must be >= error_band ({self.error_band}) or null, got "
+                             f"{self.exact_margin}")
+        if self.coarse_stride < 2:
+            raise ValueError(f"SDF grid coarse_stride must be >= 2, got {self.coarse_stride}")
 
     def digest(self) -> str:
         """Hash of the parameters that change grid values (error settings included: they are stored)."""
@@ -123,7 +153,8 @@ class SdfGrid:
     Attributes
     ----------
     values : (nx, ny, nz) float
-        Signed distance at the grid nodes (negative inside).
+        Signed distance at the grid nodes (negative inside): exact within the narrow band of
+        ``GridParams.exact_margin``, a lower bound beyond it.
     lo, hi : (3,) float
         Corners of the grid box; node ``(i, j, k)`` is at ``lo + (i, j, k) * spacing``.
     mesh_hash, params_hash
@@ -286,12 +317,60 @@ def build_grid(mesh: trimesh.Trimesh, params: GridParams) -> SdfGrid:
 
     lo, hi, shape = grid_box(mesh, params)
     axes = [np.linspace(lo[i], hi[i], shape[i]) for i in range(3)]
-    nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    values = exact_signed_distance(decimated(mesh, params.max_faces), nodes).reshape(shape)
+    values = narrow_band_values(decimated(mesh, params.max_faces), axes, params.exact_margin, params.coarse_stride)
     grid = SdfGrid(values=values.astype(np.float64), lo=lo, hi=hi, mesh_hash=mesh_hash(mesh),
                    params_hash=params.digest())
     grid.error = grid_error(grid, mesh, params.error_band, params.error_samples, params.seed)
     return grid
+
+
+def narrow_band_values(mesh: trimesh.Trimesh, axes: list[np.ndarray], margin: float | None,
+                       stride: int) -> np.ndarray:
+    """Signed distances at the nodes of a grid: exact within ``margin`` plus one cell diagonal of the surface and
+    inside, a Lipschitz lower bound (beyond that band) elsewhere (module notes: "Narrow band").
+
+    Parameters
+    ----------
+    mesh
+        The mesh (local frame).
+    axes
+        Node coordinates along x, y and z: three increasing (n_i,) arrays, evenly spaced.
+    margin
+        The band's margin (m); ``None``: exact at every node.
+    stride
+        Node stride of the first, exact pass.
+
+    Returns
+    -------
+    values : (n_x, n_y, n_z) float
+    """
+    from scipy.ndimage import binary_dilation
+
+    from phiscene.sdf import signed_distance_for
+
+    shape = tuple(len(a) for a in axes)
+    nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+    if margin is None:
+        return exact_signed_distance(mesh, nodes.reshape(-1, 3)).reshape(shape)
+    sd = signed_distance_for(mesh)
+    coarse = [np.unique(np.r_[np.arange(0, n, stride), n - 1]) for n in shape]
+    coarse_distance = sd.unsigned(nodes[np.ix_(*coarse)].reshape(-1, 3)).reshape([len(c) for c in coarse])
+    nearest = [np.abs(np.arange(n)[:, None] - c[None, :]).argmin(axis=1) for n, c in zip(shape, coarse)]
+    offset = [a - a[c[k]] for a, c, k in zip(axes, coarse, nearest)]
+    dist = np.sqrt(offset[0][:, None, None] ** 2 + offset[1][None, :, None] ** 2 + offset[2][None, None, :] ** 2)
+    bound = coarse_distance[np.ix_(*nearest)] - dist  # <= the distance to the surface (1-Lipschitz)
+    spacing = np.array([(a[-1] - a[0]) / (len(a) - 1) for a in axes])
+    far = bound > margin + float(np.linalg.norm(spacing))
+    far[far] = ~sd.inside(nodes[far])  # the sign is the exact one's (winding numbers of the same points)
+    values = np.zeros(shape)
+    values[~far] = sd(nodes[~far])
+    # next to an inside node, a far node is computed too: away from the surface the winding number can still
+    # change side (across the opening of an open mesh), and a cell mixing the two would differ
+    redo = far & binary_dilation(~far & (values < 0.0), structure=np.ones((3, 3, 3), bool))
+    values[redo] = sd(nodes[redo])
+    far &= ~redo
+    values[far] = bound[far]
+    return values
 
 
 def near_surface_points(mesh: trimesh.Trimesh, band: float, count: int, seed: int) -> np.ndarray:
@@ -324,7 +403,8 @@ def grid_error(grid: SdfGrid, mesh: trimesh.Trimesh, band: float = 0.02, count: 
     return {"max_abs": float(err.max()), "mean_abs": float(err.mean()), "band": float(band), "samples": int(count)}
 
 
-def sdf_grid(mesh: trimesh.Trimesh, params: GridParams, cache_dir: str | Path | None) -> SdfGrid:
+def sdf_grid(mesh: trimesh.Trimesh, params: GridParams, cache_dir: str | Path | None,
+             clearance: float = 0.0) -> SdfGrid:
     """The SDF grid of a local-frame mesh: from memory, from the disk cache, or built and cached.
 
     Parameters
@@ -335,7 +415,12 @@ def sdf_grid(mesh: trimesh.Trimesh, params: GridParams, cache_dir: str | Path | 
         Grid parameters.
     cache_dir
         Cache root (grids go to ``<cache_dir>/sdf_grids/``); ``None`` keeps them in memory only.
+    clearance
+        The largest distance from the surface (local units: a world clearance over the pose's scale) at which
+        the caller's hinge reads the grid; ``params.exact_margin`` is raised to it when smaller.
     """
+    if params.exact_margin is not None and clearance > params.exact_margin:
+        params = replace(params, exact_margin=float(clearance))
     mh, ph = mesh_hash(mesh), params.digest()
     key = (mh, ph)
     if key in _MEMORY:

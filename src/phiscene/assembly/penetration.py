@@ -228,7 +228,7 @@ def sdf_body(object_id: str, mesh, pose: np.ndarray, n_samples: int, params: Pen
     """
     from phiscene.meshes import sample_surface
 
-    grid = sdf_grid(mesh, params.grid, cache_dir)
+    grid = sdf_grid(mesh, params.grid, cache_dir, clearance=params.eps / decompose(pose)[2])
     key = (grid.mesh_hash, n_samples, params.seed)
     if key not in _SAMPLES:
         _SAMPLES[key] = sample_surface(mesh, n_samples, params.seed)
