@@ -294,7 +294,11 @@ def grid_box(mesh: trimesh.Trimesh, params: GridParams) -> tuple[np.ndarray, np.
 
 
 def exact_signed_distance(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
-    """Exact signed distance (negative inside), the single entry point to :mod:`phiscene.sdf`.
+    """Exact signed distance (negative inside) from :mod:`phiscene.sdf`.
+
+    The grid's other use of that module is :func:`narrow_band_values`, which reads the parts of the same cached
+    :class:`phiscene.sdf.SignedDistance` (the distance alone, the inside test) so as to compute the sign only
+    where the distance does not already bound the value.
 
     Parameters
     ----------
