@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import hashlib
+from collections import OrderedDict
+from dataclasses import dataclass, replace
 
 import numpy as np
 import trimesh
@@ -37,9 +39,30 @@ class RigidProps:
     source: str
 
 
+#: Mass properties computed in this process, by :func:`_props_key` (:func:`rigid_props`); the oldest go first.
+_PROPS: OrderedDict = OrderedDict()
+#: Entries :data:`_PROPS` keeps: more than the objects of a large scene, each at the scales it is simulated at.
+PROPS_CACHE_SIZE = 512
+
+
+def _props_key(mesh: trimesh.Trimesh, hulls: list[np.ndarray] | None, density: float, scale: float,
+               com: np.ndarray | None) -> bytes:
+    """Digest of every input of :func:`rigid_props` (the arrays' bytes and shapes, the numbers' bit patterns)."""
+    h = hashlib.sha1()
+    arrays = [mesh.vertices, mesh.faces] + list(hulls or []) + ([com] if com is not None else [])
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        h.update(f"{a.dtype}{a.shape}|".encode())
+        h.update(a.tobytes())
+    h.update(np.array([density, scale], dtype=float).tobytes())
+    h.update(b"hulls" if hulls else b"")  # an empty list and None: the same answer
+    return h.digest()
+
+
 def rigid_props(mesh: trimesh.Trimesh, hulls: list[np.ndarray] | None, density: float,
                 scale: float = 1.0, com: np.ndarray | None = None) -> RigidProps:
-    """Mass, centre of mass and inertia of an object.
+    """Mass, centre of mass and inertia of an object (remembered in this process: a grounding asks for the same
+    object's at every world it builds).
 
     A closed (watertight, positive-volume) mesh is integrated exactly; an open
     or multi-shell one falls back to the union of its convex proxies.
@@ -60,6 +83,19 @@ def rigid_props(mesh: trimesh.Trimesh, hulls: list[np.ndarray] | None, density: 
     com : (3,) float, optional
         Declared centre of mass, local frame (unscaled); ``None``: the uniform solid's.
     """
+    key = _props_key(mesh, hulls, density, scale, com)
+    if key not in _PROPS:
+        _PROPS[key] = _rigid_props(mesh, hulls, density, scale, com)
+        while len(_PROPS) > PROPS_CACHE_SIZE:
+            _PROPS.popitem(last=False)
+    p = _PROPS[key]
+    return replace(p, com=p.com.copy(), principal_moments=p.principal_moments.copy(),
+                   principal_axes=p.principal_axes.copy())
+
+
+def _rigid_props(mesh: trimesh.Trimesh, hulls: list[np.ndarray] | None, density: float, scale: float,
+                 com: np.ndarray | None) -> RigidProps:
+    """:func:`rigid_props`, computed."""
     body = None
     source = "mesh"
     if mesh.is_volume and mesh.volume > TOL.min_volume:
