@@ -60,14 +60,16 @@ def time_scene(scene_path: Path, cfg: dict, cache: Path, method: str = "phi_scen
 
 
 def time_suite_scene(results: Path, suite: str, scene: str, cfg: dict, method: str = "phi_scene") -> dict:
-    """Seconds of the workflow's grounding job of one built scene (``phiscene.pipeline.run_ground`` on its
-    topology, proxies and camera under ``results``), run twice in this process and timed the second time.
+    """Seconds of the workflow's grounding job of one built scene (``phiscene.pipeline.run_ground`` on the
+    method's topology, the proxies and the camera under ``results``), run twice in this process and timed the
+    second time.
 
     ``topology_s`` times the geometric backend's inference, which the workflow runs as a job of its own."""
     from phiscene.pipeline import run_ground
 
     base = results / "scenes" / suite / scene
-    topo = results / "topology" / "geometric" / suite / f"{scene}.json"
+    backend = cfg["methods"][method].get("topology", "geometric")
+    topo = results / "topology" / backend / suite / f"{scene}.json"
     camera = base / "reference" / "camera.json"
     args = (base / "initial" / "scene.json", topo, results / "proxies" / suite / f"{scene}.npz")
     with tempfile.TemporaryDirectory() as tmp:

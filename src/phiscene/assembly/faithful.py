@@ -372,9 +372,10 @@ def support_normal(mesh_world, parents_world: dict[str, object]) -> np.ndarray:
     Returns
     -------
     The area-weighted mean of the upward-facing supporter face normals closest to the object's lowest
-    points (within 10% of its height of its lowest point; at a supporter's edge or vertex the most upward of the
-    faces that meet there, :func:`closest_faces`), or +z when none face up.
+    points (within 10% of its height of its lowest point), or +z when none face up.
     """
+    import trimesh
+
     up = np.array([0.0, 0.0, 1.0])
     objects = {k: m for k, m in parents_world.items() if m is not None}
     if not objects:
@@ -386,7 +387,8 @@ def support_normal(mesh_world, parents_world: dict[str, object]) -> np.ndarray:
     if "ground" in parents_world:
         acc += up * len(low)
     for m in objects.values():
-        dist, tri = closest_faces(m, low)
+        with np.errstate(divide="ignore", invalid="ignore"):  # quiet on degenerate faces (same result)
+            _, dist, tri = trimesh.proximity.closest_point(m, low)
         n = m.face_normals[tri]
         near = dist <= max(0.02, 2 * float(np.min(dist)))
         w = (n[:, 2] > 0.5) & near
@@ -394,55 +396,6 @@ def support_normal(mesh_world, parents_world: dict[str, object]) -> np.ndarray:
                 if w.any() else np.zeros((0, 3))).sum(axis=0)
     norm = np.linalg.norm(acc)
     return acc / norm if norm > 1e-9 else up
-
-
-#: Barycentric coordinate below which a closest point lies on its triangle's edge or vertex (:func:`closest_faces`).
-ON_EDGE = 1e-9
-
-
-def closest_faces(mesh, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Distance to a mesh and the face nearest each point, the most upward one where several are.
-
-    A point whose closest point on the mesh lies on an edge or a vertex is as near to every face meeting
-    there (the top and the side of a table at its rim); of those the face with the largest normal z is taken,
-    the surface a body resting there would bear on.
-
-    Parameters
-    ----------
-    mesh
-        Triangle mesh (trimesh) in world coordinates.
-    points : (n, 3) float
-
-    Returns
-    -------
-    distance : (n,) float
-    face : (n,) int
-    """
-    import igl
-    import trimesh
-
-    p = np.ascontiguousarray(points, dtype=float)
-    d2, face, closest = igl.point_mesh_squared_distance(p, np.ascontiguousarray(mesh.vertices, dtype=float),
-                                                        np.ascontiguousarray(mesh.faces, dtype=np.int64))
-    face = np.asarray(face, dtype=np.int64)
-    with np.errstate(divide="ignore", invalid="ignore"):  # degenerate faces give NaN: no tie taken
-        bary = trimesh.triangles.points_to_barycentric(mesh.triangles[face], closest)
-    rim = np.flatnonzero(np.where(np.isfinite(bary), bary, 1.0).min(axis=1) <= ON_EDGE)
-    if len(rim):
-        normals_z = mesh.face_normals[:, 2]
-        faces = np.asarray(mesh.faces, dtype=np.int64)
-        order = np.argsort(faces.ravel(), kind="stable")  # the faces around each vertex, by vertex
-        first = np.searchsorted(faces.ravel()[order], np.arange(len(mesh.vertices) + 1))
-        for i in rim:
-            corners = faces[face[i]][bary[i] > ON_EDGE]  # the edge's two vertices, or the one vertex
-            if len(corners) == 0:
-                continue
-            tied = order[first[corners[0]]:first[corners[0] + 1]] // 3
-            for c in corners[1:]:
-                tied = np.intersect1d(tied, order[first[c]:first[c + 1]] // 3)
-            if len(tied):
-                face[i] = tied[np.argmax(normals_z[tied])]
-    return np.sqrt(np.maximum(np.asarray(d2, dtype=float), 0.0)), face
 
 
 def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
