@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import hashlib
 from collections import OrderedDict
 from dataclasses import dataclass, replace
 
@@ -39,24 +38,22 @@ class RigidProps:
     source: str
 
 
-#: Mass properties computed in this process, by :func:`_props_key` (:func:`rigid_props`); the oldest go first.
-_PROPS: OrderedDict = OrderedDict()
+#: Mass properties computed in this process, by :func:`_props_key` (:func:`rigid_props`); least recently used
+#: evicted beyond :data:`PROPS_CACHE_SIZE`.
+_PROPS: "OrderedDict[tuple, RigidProps]" = OrderedDict()
 #: Entries :data:`_PROPS` keeps: more than the objects of a large scene, each at the scales it is simulated at.
 PROPS_CACHE_SIZE = 512
 
 
 def _props_key(mesh: trimesh.Trimesh, hulls: list[np.ndarray] | None, density: float, scale: float,
-               com: np.ndarray | None) -> bytes:
-    """Digest of every input of :func:`rigid_props` (the arrays' bytes and shapes, the numbers' bit patterns)."""
-    h = hashlib.sha1()
-    arrays = [mesh.vertices, mesh.faces] + list(hulls or []) + ([com] if com is not None else [])
-    for a in arrays:
-        a = np.ascontiguousarray(a)
-        h.update(f"{a.dtype}{a.shape}|".encode())
-        h.update(a.tobytes())
-    h.update(np.array([density, scale], dtype=float).tobytes())
-    h.update(b"hulls" if hulls else b"")  # an empty list and None: the same answer
-    return h.digest()
+               com: np.ndarray | None) -> tuple:
+    """Every input of :func:`rigid_props`: the mesh and hulls by their content hashes
+    (:func:`phiscene.meshes.mesh_hash`, :func:`phiscene.proxies.hulls_hash`), the numbers as given."""
+    from phiscene.meshes import mesh_hash
+    from phiscene.proxies import hulls_hash
+
+    return (mesh_hash(mesh), hulls_hash(hulls) if hulls else None, float(density), float(scale),
+            None if com is None else tuple(np.asarray(com, dtype=float).tolist()))
 
 
 def rigid_props(mesh: trimesh.Trimesh, hulls: list[np.ndarray] | None, density: float,
@@ -84,11 +81,13 @@ def rigid_props(mesh: trimesh.Trimesh, hulls: list[np.ndarray] | None, density: 
         Declared centre of mass, local frame (unscaled); ``None``: the uniform solid's.
     """
     key = _props_key(mesh, hulls, density, scale, com)
-    if key not in _PROPS:
-        _PROPS[key] = _rigid_props(mesh, hulls, density, scale, com)
-        while len(_PROPS) > PROPS_CACHE_SIZE:
+    p = _PROPS.get(key)
+    if p is None:
+        p = _PROPS[key] = _rigid_props(mesh, hulls, density, scale, com)
+        if len(_PROPS) > PROPS_CACHE_SIZE:
             _PROPS.popitem(last=False)
-    p = _PROPS[key]
+    else:
+        _PROPS.move_to_end(key)
     return replace(p, com=p.com.copy(), principal_moments=p.principal_moments.copy(),
                    principal_axes=p.principal_axes.copy())
 
