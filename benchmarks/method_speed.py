@@ -19,6 +19,7 @@ only beside them.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import tempfile
@@ -52,11 +53,15 @@ def time_scene(scene_path: Path, cfg: dict, cache: Path, method: str = "phi_scen
     graph = topology.infer(scene, "geometric", cfg["topology"].get("geometric", {}))
     t_topo = time.perf_counter() - t0
     _, rec = ground_scene(scene, graph.order, proxies, params, sim, cache, graph=graph)
-    objs = rec["objects"].values() if isinstance(rec["objects"], dict) else rec["objects"]
-    sdf = sum(o["seconds"].get("sdf", 0.0) for o in objs)
-    settle = sum(o["seconds"].get("settle", 0.0) for o in objs)
-    return {"objects": len(scene), "topology_s": t_topo, "sdf_s": sdf, "settle_s": settle,
-            "total_s": t_topo + rec["summary"]["seconds"], "unsettled": len(rec["summary"]["unsettled"])}
+    return {"topology_s": t_topo, "total_s": t_topo + rec["summary"]["seconds"], **_stages(rec)}
+
+
+def _stages(record: dict) -> dict:
+    """Objects, summed SDF and settling seconds and unsettled objects of an assembly record."""
+    objs = list(record["objects"].values())
+    return {"objects": len(objs), "sdf_s": sum(o["seconds"].get("sdf", 0.0) for o in objs),
+            "settle_s": sum(o["seconds"].get("settle", 0.0) for o in objs),
+            "unsettled": len(record["summary"]["unsettled"])}
 
 
 def time_suite_scene(results: Path, suite: str, scene: str, cfg: dict, method: str = "phi_scene") -> dict:
@@ -79,16 +84,12 @@ def time_suite_scene(results: Path, suite: str, scene: str, cfg: dict, method: s
         t0 = time.perf_counter()
         run_ground(*args, *out, method_assembly(cfg, method), cfg["sim"], results / "cache", **kw)
         total = time.perf_counter() - t0
-        rec = yaml.safe_load(out[1].read_text())  # JSON is YAML
+        rec = json.loads(out[1].read_text())
     scene_obj = load_scene(base / "initial" / "scene.json")
     t0 = time.perf_counter()
     topology.infer(scene_obj, "geometric", cfg["topology"].get("geometric", {}))
     t_topo = time.perf_counter() - t0
-    objs = list(rec["objects"].values())
-    return {"objects": len(objs), "topology_s": t_topo,
-            "sdf_s": sum(o["seconds"].get("sdf", 0.0) for o in objs),
-            "settle_s": sum(o["seconds"].get("settle", 0.0) for o in objs),
-            "total_s": total, "unsettled": len(rec["summary"]["unsettled"])}
+    return {"topology_s": t_topo, "total_s": total, **_stages(rec)}
 
 
 def main() -> int:
