@@ -372,10 +372,9 @@ def support_normal(mesh_world, parents_world: dict[str, object]) -> np.ndarray:
     Returns
     -------
     The area-weighted mean of the upward-facing supporter face normals closest to the object's lowest
-    points (within 10% of its height of its lowest point), or +z when none face up.
+    points (within 10% of its height of its lowest point; at a supporter's edge or vertex the most upward of the
+    faces that meet there, :func:`closest_faces`), or +z when none face up.
     """
-    import trimesh
-
     up = np.array([0.0, 0.0, 1.0])
     objects = {k: m for k, m in parents_world.items() if m is not None}
     if not objects:
@@ -387,8 +386,7 @@ def support_normal(mesh_world, parents_world: dict[str, object]) -> np.ndarray:
     if "ground" in parents_world:
         acc += up * len(low)
     for m in objects.values():
-        with np.errstate(divide="ignore", invalid="ignore"):  # quiet on degenerate faces (same result)
-            _, dist, tri = trimesh.proximity.closest_point(m, low)
+        dist, tri = closest_faces(m, low)
         n = m.face_normals[tri]
         near = dist <= max(0.02, 2 * float(np.min(dist)))
         w = (n[:, 2] > 0.5) & near
@@ -396,6 +394,55 @@ def support_normal(mesh_world, parents_world: dict[str, object]) -> np.ndarray:
                 if w.any() else np.zeros((0, 3))).sum(axis=0)
     norm = np.linalg.norm(acc)
     return acc / norm if norm > 1e-9 else up
+
+
+#: Barycentric coordinate below which a closest point lies on its triangle's edge or vertex (:func:`closest_faces`).
+ON_EDGE = 1e-9
+
+
+def closest_faces(mesh, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance to a mesh and the face nearest each point, the most upward one where several are.
+
+    A point whose closest point on the mesh lies on an edge or a vertex is as near to every face meeting
+    there (the top and the side of a table at its rim); of those the face with the largest normal z is taken,
+    the surface a body resting there would bear on.
+
+    Parameters
+    ----------
+    mesh
+        Triangle mesh (trimesh) in world coordinates.
+    points : (n, 3) float
+
+    Returns
+    -------
+    distance : (n,) float
+    face : (n,) int
+    """
+    import igl
+    import trimesh
+
+    p = np.ascontiguousarray(points, dtype=float)
+    d2, face, closest = igl.point_mesh_squared_distance(p, np.ascontiguousarray(mesh.vertices, dtype=float),
+                                                        np.ascontiguousarray(mesh.faces, dtype=np.int64))
+    face = np.asarray(face, dtype=np.int64)
+    with np.errstate(divide="ignore", invalid="ignore"):  # degenerate faces give NaN: no tie taken
+        bary = trimesh.triangles.points_to_barycentric(mesh.triangles[face], closest)
+    rim = np.flatnonzero(np.where(np.isfinite(bary), bary, 1.0).min(axis=1) <= ON_EDGE)
+    if len(rim):
+        normals_z = mesh.face_normals[:, 2]
+        faces = np.asarray(mesh.faces, dtype=np.int64)
+        order = np.argsort(faces.ravel(), kind="stable")  # the faces around each vertex, by vertex
+        first = np.searchsorted(faces.ravel()[order], np.arange(len(mesh.vertices) + 1))
+        for i in rim:
+            corners = faces[face[i]][bary[i] > ON_EDGE]  # the edge's two vertices, or the one vertex
+            if len(corners) == 0:
+                continue
+            tied = order[first[corners[0]]:first[corners[0] + 1]] // 3
+            for c in corners[1:]:
+                tied = np.intersect1d(tied, order[first[c]:first[c + 1]] // 3)
+            if len(tied):
+                face[i] = tied[np.argmax(normals_z[tied])]
+    return np.sqrt(np.maximum(np.asarray(d2, dtype=float), 0.0)), face
 
 
 def _rotation_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -1152,14 +1199,53 @@ def onto_start(pose: np.ndarray, com_local: np.ndarray, points_world: np.ndarray
     return out, float(np.linalg.norm(target - c[:2]))
 
 
-def lost_supporters(below: list[str], leaning: list[str], touching: list[str]) -> list[str]:
-    """Supporters the object lost at rest: all of ``below`` when it touches none of them, plus untouched ``leaning``.
+def lost_supporters(below: list[str], leaning: list[str], touching: list[str],
+                    carries: dict[str, set[str]] | None = None) -> list[str]:
+    """Supporters the object lost at rest: all of ``below`` when it rests on none of them, plus untouched ``leaning``.
 
     An object carried from below needs one of its carriers (the graph may name a table that ``contains`` a
-    jug standing on a plate); each object it leans on must still be touched.
+    jug standing on a plate); each object it leans on must still be touched. It rests on a carrier ``p`` when it
+    touches ``p`` or an object ``p`` carries (``carries[p]``, the graph's objects below which ``p`` lies): its
+    weight still goes down to ``p``. A box the graph puts on a shelf (one level skipped: the commonest wrong support
+    graph) that comes to rest on the book lying on that shelf has kept it. The ground is never reached that way
+    (it carries everything).
+
+    Parameters
+    ----------
+    below, leaning
+        The graph's supporters from below and the objects leaned on.
+    touching
+        What the object touches at rest.
+    carries
+        Object id -> the ids it carries, directly or through others (:func:`carried_objects`); ``None``: none.
     """
-    lost = [] if not below or any(p in touching for p in below) else list(below)
+    carries = carries or {}
+    rests = set(touching)
+    rests.update(p for p in below if p != "ground" and carries.get(p, set()) & set(touching))
+    lost = [] if not below or any(p in rests for p in below) else list(below)
     return lost + [p for p in leaning if p not in touching]
+
+
+def carried_objects(edges: list[tuple[str, str]], among: set[str]) -> dict[str, set[str]]:
+    """What each object carries from below, directly or through others, within ``among``.
+
+    Parameters
+    ----------
+    edges
+        ``(source, target)`` pairs of the graph's edges from below (:data:`BELOW` relations): source carries target.
+    among
+        The objects considered (the placed ones); edges touching others are left out.
+
+    Returns
+    -------
+    dict
+        Object id -> the set of ids below which it lies (its descendants), for each object in ``among`` that
+        carries any.
+    """
+    import networkx as nx
+
+    g = nx.DiGraph((a, b) for a, b in edges if a in among and b in among and a != b)
+    return {n: set(nx.descendants(g, n)) for n in g.nodes if g.out_degree(n)}
 
 
 def fallback_rank(attempt: dict) -> tuple:
@@ -1193,7 +1279,7 @@ def gross_failures(certificates: dict[str, dict], fp: FaithfulParams) -> dict[st
 
 def certificate(settled: bool | None, remedy: str, below: list[str], leaning: list[str], touching: list[str],
                 displacement: float, rotation_change_deg: float, flush_angle: float,
-                reason: str = "") -> dict:
+                reason: str = "", carries: dict[str, set[str]] | None = None) -> dict:
     """Per-object certificate for the assembly log.
 
     Parameters
@@ -1214,8 +1300,10 @@ def certificate(settled: bool | None, remedy: str, below: list[str], leaning: li
         Flush rotation applied (deg).
     reason
         Why a remedy beyond the paper's was needed.
+    carries
+        What each placed object carries (:func:`lost_supporters`).
     """
-    lost = lost_supporters(below, leaning, touching)
+    lost = lost_supporters(below, leaning, touching, carries)
     return {"settled": settled, "remedy": remedy, "supporters": list(below) + list(leaning),
             "touching": sorted(touching),
             "supporters_kept": not lost, "lost": lost, "displacement": round(float(displacement), 9),
