@@ -283,7 +283,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                 rec["certificate"] = fa.certificate(
                     rec["settled"], rec["settle_remedy"] or "none", info["below"], info["leaning"],
                     rec.get("touching", []),
-                    moved, np.degrees(turned), info["flush_angle"], rec.get("reason", ""), info["carries"])
+                    moved, np.degrees(turned), info["flush_angle"], rec.get("reason", ""))
             rec["seconds"] = {k: _round(v, 6) for k, v in rec["seconds"].items()}
             objects[oid] = rec
             if progress is not None:
@@ -571,9 +571,7 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
             "diag": float(np.linalg.norm(mesh.extents) * scale),
             "placed": list(poses), "input": np.asarray(obj.pose, dtype=float),
             "walls": [q for q in scene.structure if q.kind == "wall"], "cache_dir": cache_dir,
-            "points": points, "below_world": parents_world,
-            "carries": fa.carried_objects([(e.source, e.target) for e in graph.edges if e.relation in fa.BELOW]
-                                          if graph is not None else [], set(poses))}
+            "points": points, "below_world": parents_world}
 
 
 #: Part of the key of the cached resting normals: changed when :func:`~phiscene.assembly.faithful.resting_normals`
@@ -682,7 +680,7 @@ def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim:
         if fell:
             ok, moved = False, max(moved, fell)
         near = touching()
-        lost = fa.lost_supporters(info["below"], info["leaning"], near, info["carries"])
+        lost = fa.lost_supporters(info["below"], info["leaning"], near)
         # in place: within the bounds, still leaning where it leans (the graph may name the wrong supporter
         # from below: an object that rests where it was put, on something else, is in place all the same)
         in_place = ok and not any(p in lost for p in info["leaning"])

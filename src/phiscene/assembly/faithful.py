@@ -1199,53 +1199,14 @@ def onto_start(pose: np.ndarray, com_local: np.ndarray, points_world: np.ndarray
     return out, float(np.linalg.norm(target - c[:2]))
 
 
-def lost_supporters(below: list[str], leaning: list[str], touching: list[str],
-                    carries: dict[str, set[str]] | None = None) -> list[str]:
-    """Supporters the object lost at rest: all of ``below`` when it rests on none of them, plus untouched ``leaning``.
+def lost_supporters(below: list[str], leaning: list[str], touching: list[str]) -> list[str]:
+    """Supporters the object lost at rest: all of ``below`` when it touches none of them, plus untouched ``leaning``.
 
     An object carried from below needs one of its carriers (the graph may name a table that ``contains`` a
-    jug standing on a plate); each object it leans on must still be touched. It rests on a carrier ``p`` when it
-    touches ``p`` or an object ``p`` carries (``carries[p]``, the graph's objects below which ``p`` lies): its
-    weight still goes down to ``p``. A box the graph puts on a shelf (one level skipped: the commonest wrong support
-    graph) that comes to rest on the book lying on that shelf has kept it. The ground is never reached that way
-    (it carries everything).
-
-    Parameters
-    ----------
-    below, leaning
-        The graph's supporters from below and the objects leaned on.
-    touching
-        What the object touches at rest.
-    carries
-        Object id -> the ids it carries, directly or through others (:func:`carried_objects`); ``None``: none.
+    jug standing on a plate); each object it leans on must still be touched.
     """
-    carries = carries or {}
-    rests = set(touching)
-    rests.update(p for p in below if p != "ground" and carries.get(p, set()) & set(touching))
-    lost = [] if not below or any(p in rests for p in below) else list(below)
+    lost = [] if not below or any(p in touching for p in below) else list(below)
     return lost + [p for p in leaning if p not in touching]
-
-
-def carried_objects(edges: list[tuple[str, str]], among: set[str]) -> dict[str, set[str]]:
-    """What each object carries from below, directly or through others, within ``among``.
-
-    Parameters
-    ----------
-    edges
-        ``(source, target)`` pairs of the graph's edges from below (:data:`BELOW` relations): source carries target.
-    among
-        The objects considered (the placed ones); edges touching others are left out.
-
-    Returns
-    -------
-    dict
-        Object id -> the set of ids below which it lies (its descendants), for each object in ``among`` that
-        carries any.
-    """
-    import networkx as nx
-
-    g = nx.DiGraph((a, b) for a, b in edges if a in among and b in among and a != b)
-    return {n: set(nx.descendants(g, n)) for n in g.nodes if g.out_degree(n)}
 
 
 def fallback_rank(attempt: dict) -> tuple:
@@ -1279,7 +1240,7 @@ def gross_failures(certificates: dict[str, dict], fp: FaithfulParams) -> dict[st
 
 def certificate(settled: bool | None, remedy: str, below: list[str], leaning: list[str], touching: list[str],
                 displacement: float, rotation_change_deg: float, flush_angle: float,
-                reason: str = "", carries: dict[str, set[str]] | None = None) -> dict:
+                reason: str = "") -> dict:
     """Per-object certificate for the assembly log.
 
     Parameters
@@ -1300,10 +1261,8 @@ def certificate(settled: bool | None, remedy: str, below: list[str], leaning: li
         Flush rotation applied (deg).
     reason
         Why a remedy beyond the paper's was needed.
-    carries
-        What each placed object carries (:func:`lost_supporters`).
     """
-    lost = lost_supporters(below, leaning, touching, carries)
+    lost = lost_supporters(below, leaning, touching)
     return {"settled": settled, "remedy": remedy, "supporters": list(below) + list(leaning),
             "touching": sorted(touching),
             "supporters_kept": not lost, "lost": lost, "displacement": round(float(displacement), 9),
