@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from dataclasses import dataclass, replace
 
 import numpy as np
 import trimesh
 
 from phiscene.errors import InputError
+from phiscene.memo import Memo
 from phiscene.tolerances import TOL
 
 
@@ -39,10 +39,8 @@ class RigidProps:
 
 
 #: Mass properties computed in this process, by :func:`_props_key` (:func:`rigid_props`); least recently used
-#: evicted beyond :data:`PROPS_CACHE_SIZE`.
-_PROPS: "OrderedDict[tuple, RigidProps]" = OrderedDict()
-#: Entries :data:`_PROPS` keeps: more than the objects of a large scene, each at the scales it is simulated at.
-PROPS_CACHE_SIZE = 512
+#: evicted beyond 512 entries, more than the objects of a large scene, each at the scales it is simulated at.
+_PROPS: "Memo[RigidProps]" = Memo(512)
 
 
 def _props_key(mesh: trimesh.Trimesh, hulls: list[np.ndarray] | None, density: float, scale: float,
@@ -80,14 +78,8 @@ def rigid_props(mesh: trimesh.Trimesh, hulls: list[np.ndarray] | None, density: 
     com : (3,) float, optional
         Declared centre of mass, local frame (unscaled); ``None``: the uniform solid's.
     """
-    key = _props_key(mesh, hulls, density, scale, com)
-    p = _PROPS.get(key)
-    if p is None:
-        p = _PROPS[key] = _rigid_props(mesh, hulls, density, scale, com)
-        if len(_PROPS) > PROPS_CACHE_SIZE:
-            _PROPS.popitem(last=False)
-    else:
-        _PROPS.move_to_end(key)
+    p = _PROPS.get(_props_key(mesh, hulls, density, scale, com),
+                   lambda: _rigid_props(mesh, hulls, density, scale, com))
     return replace(p, com=p.com.copy(), principal_moments=p.principal_moments.copy(),
                    principal_axes=p.principal_axes.copy())
 

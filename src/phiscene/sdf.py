@@ -28,12 +28,12 @@ inside the object it stands for.
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
 import trimesh
 
+from phiscene.memo import Memo
 from phiscene.params import Params
 from phiscene.tolerances import TOL
 
@@ -257,24 +257,14 @@ def _check_points(points: np.ndarray) -> np.ndarray:
 
 
 #: Per-process cache of :class:`SignedDistance` by mesh content hash (least recently used evicted).
-_CACHE: "OrderedDict[str, SignedDistance]" = OrderedDict()
-_CACHE_SIZE = 128
+_CACHE: "Memo[SignedDistance]" = Memo(128)
 
 
 def signed_distance_for(mesh: trimesh.Trimesh) -> SignedDistance:
     """The cached :class:`SignedDistance` of ``mesh`` (keyed by :func:`phiscene.meshes.mesh_hash`)."""
     from phiscene.meshes import mesh_hash
 
-    key = mesh_hash(mesh)
-    sd = _CACHE.get(key)
-    if sd is None:
-        sd = SignedDistance(mesh)
-        _CACHE[key] = sd
-        if len(_CACHE) > _CACHE_SIZE:
-            _CACHE.popitem(last=False)
-    else:
-        _CACHE.move_to_end(key)
-    return sd
+    return _CACHE.get(mesh_hash(mesh), lambda: SignedDistance(mesh))
 
 
 def signed_distance(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:

@@ -51,7 +51,6 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-from collections import OrderedDict
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -59,6 +58,7 @@ import numpy as np
 import trimesh
 
 from phiscene.atomic import atomic_path
+from phiscene.memo import Memo
 from phiscene.meshes import mesh_hash
 from phiscene.params import Params
 from phiscene.transforms import decompose
@@ -68,9 +68,8 @@ log = logging.getLogger(__name__)
 #: Bump when grid construction changes in a way that changes values.
 SDF_GRID_VERSION = 3
 
-#: In-memory grids by (mesh hash, params hash), least recently used evicted beyond ``_MEMORY_SIZE``.
-_MEMORY: "OrderedDict[tuple[str, str], SdfGrid]" = OrderedDict()
-_MEMORY_SIZE = 128
+#: In-memory grids by (mesh hash, params hash), least recently used evicted.
+_MEMORY: "Memo[SdfGrid]" = Memo(128)
 
 
 @dataclass(frozen=True)
@@ -429,20 +428,17 @@ def sdf_grid(mesh: trimesh.Trimesh, params: GridParams, cache_dir: str | Path | 
     if params.exact_margin is not None and clearance > params.exact_margin:
         params = replace(params, exact_margin=float(clearance))
     mh, ph = mesh_hash(mesh), params.digest()
-    key = (mh, ph)
-    if key in _MEMORY:
-        _MEMORY.move_to_end(key)
-        return _MEMORY[key]
-    path = None if cache_dir is None else Path(cache_dir) / "sdf_grids" / f"{mh}-{ph}.npz"
-    grid = None if path is None else read_grid(path, mh, ph)
-    if grid is None:
-        grid = build_grid(mesh, params)
-        if path is not None:
-            write_grid(path, grid)
-    _MEMORY[key] = grid
-    if len(_MEMORY) > _MEMORY_SIZE:
-        _MEMORY.popitem(last=False)
-    return grid
+
+    def load_or_build() -> SdfGrid:
+        path = None if cache_dir is None else Path(cache_dir) / "sdf_grids" / f"{mh}-{ph}.npz"
+        grid = None if path is None else read_grid(path, mh, ph)
+        if grid is None:
+            grid = build_grid(mesh, params)
+            if path is not None:
+                write_grid(path, grid)
+        return grid
+
+    return _MEMORY.get((mh, ph), load_or_build)
 
 
 def clear_memory_cache() -> None:

@@ -27,13 +27,13 @@ to the outside) is returned unchanged, as is one whose outer faces would be fewe
 
 from __future__ import annotations
 
-from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import trimesh
 
+from phiscene.memo import Memo
 from phiscene.params import Params
 from phiscene.tolerances import TOL
 
@@ -251,8 +251,7 @@ def inner_faces(mesh: trimesh.Trimesh, params: ShellParams = ShellParams()) -> n
 
 
 #: Per-process cache of outer shells by mesh content hash (least recently used evicted).
-_CACHE: "OrderedDict[str, trimesh.Trimesh]" = OrderedDict()
-_CACHE_SIZE = 256
+_CACHE: "Memo[trimesh.Trimesh]" = Memo(256)
 #: Folder of the on-disk cache of inner-face masks (:func:`use_disk_cache`); ``None``: memory only.
 _DISK: Path | None = None
 
@@ -315,20 +314,16 @@ def outer_shell(mesh: trimesh.Trimesh, params: ShellParams = ShellParams()) -> t
     from phiscene.meshes import mesh_hash
 
     key = f"{mesh_hash(mesh)}-{params.digest()}"
-    got = _CACHE.get(key)
-    if got is not None:
-        _CACHE.move_to_end(key)
-        return got
-    inner = _inner_mask(mesh, params, key)
-    if inner.any():
+
+    def shell() -> trimesh.Trimesh:
+        inner = _inner_mask(mesh, params, key)
+        if not inner.any():
+            return mesh
         got = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces)[~inner], process=False)
         got.remove_unreferenced_vertices()
-    else:
-        got = mesh
-    _CACHE[key] = got
-    if len(_CACHE) > _CACHE_SIZE:
-        _CACHE.popitem(last=False)
-    return got
+        return got
+
+    return _CACHE.get(key, shell)
 
 
 def solid_surface(mesh: trimesh.Trimesh, resolution: int) -> trimesh.Trimesh:
