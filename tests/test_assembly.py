@@ -280,7 +280,7 @@ def test_plank_jammed_across_a_gap_turns_free(work):
     assert w[2] == pytest.approx((0.01 + EPS) / 0.3, abs=0.01)  # counter-clockwise about z
     assert np.linalg.norm(x) < 0.01
     # the pose the assembly makes of it clears both blocks by eps, up to the grids' error
-    from phiscene.assembly.assemble import turned_about
+    from phiscene.transforms import turned_about
 
     pose = turned_about(active.pose, w, np.asarray(info["pivot"]))
     pose[:3, 3] += x

@@ -16,7 +16,8 @@ import trimesh
 from scenes import ground_alone
 from simcheck import saved_and_released
 
-from phiscene.assembly.faithful import FaithfulParams, ballast_com
+from phiscene.assembly.ballast import ballast_com
+from phiscene.assembly.faithful import FaithfulParams
 from phiscene.inertia import rigid_props
 from phiscene.meshes import save_mesh
 from phiscene.sim.settings import SimSettings

@@ -18,7 +18,7 @@ import trimesh
 from scenes import convex_proxies, ground_alone
 from simcheck import saved_and_released
 
-from phiscene.assembly.faithful import flat_base
+from phiscene.assembly.ballast import flat_base
 from phiscene.errors import InputError
 from phiscene.meshes import save_mesh
 from phiscene.proxies import with_base, with_bases

@@ -17,17 +17,11 @@ from scenes import box_scene, convex_proxies
 from scipy.spatial.transform import Rotation
 
 from phiscene.assembly import AssemblyParams, ground_scene
-from phiscene.assembly.faithful import (
-    FaithfulParams,
-    carried,
-    closest_faces,
-    flush_pose,
-    gross_failures,
-    resting_candidates,
-    resting_normals,
-    resting_on,
-    support_normal,
-)
+from phiscene.assembly.beneath import resting_on
+from phiscene.assembly.certify import gross_failures
+from phiscene.assembly.faithful import FaithfulParams
+from phiscene.assembly.resting import closest_faces, flush_pose, resting_candidates, resting_normals, support_normal
+from phiscene.assembly.starts import carried
 from phiscene.meshes import save_mesh
 from phiscene.metrics.pose import pose_metrics
 from phiscene.sim.settings import SimSettings
@@ -637,7 +631,7 @@ def test_pose_metrics_gt_add_s(work):
 
 def test_lowering_onto_a_supporter_that_is_not_beneath_stops_at_the_ground(tmp_path):
     """A carried object whose supporter moved away is lowered until the ground stops it, never through it."""
-    from phiscene.assembly.assemble import _lowered
+    from phiscene.assembly.guarded import lowered_start
     from phiscene.sim.bullet import BulletWorld
 
     box = trimesh.creation.box((0.1, 0.1, 0.1))
@@ -646,7 +640,7 @@ def test_lowering_onto_a_supporter_that_is_not_beneath_stops_at_the_ground(tmp_p
         world.add_ground(0.0)
         world.add_body("table", hulls, make_pose(translation=(1.0, 0.0, 0.05)), None)  # 1 m to the side
         world.add_body("cup", hulls, make_pose(translation=(0.0, 0.0, 0.6)), None)
-        out = _lowered(world, "cup", make_pose(translation=(0.0, 0.0, 0.6)), ["table"], 0.002)
+        out = lowered_start(world, "cup", make_pose(translation=(0.0, 0.0, 0.6)), ["table"], 0.002)
     bottom = out[2, 3] - 0.05
     assert 0.0 <= bottom <= 0.002 + 1e-9
 
@@ -674,7 +668,7 @@ def test_box_beside_a_wall_shelf_is_moved_onto_it(work, faithful):
 
 
 def test_onto_start_centres_the_footprint_inside_the_edge_clear_of_walls():
-    from phiscene.assembly.faithful import onto_start
+    from phiscene.assembly.starts import onto_start
     from phiscene.scene import Plane
 
     # a level 0.3 m square surface at z = 1.02 (a regular grid of samples); a 10 cm cube whose centre is 6 cm beyond
@@ -700,7 +694,7 @@ def test_onto_start_centres_the_footprint_inside_the_edge_clear_of_walls():
 
 
 def test_flush_attached_makes_a_tilted_wall_shelf_level_and_puts_its_back_on_the_wall():
-    from phiscene.assembly.faithful import flush_attached
+    from phiscene.assembly.resting import flush_attached
 
     # a shelf board 0.6 x 0.18 x 0.03 m fixed to the wall y = 0 (room on y < 0), input tilted 8 deg about x and
     # 3 deg about y and pushed 2 cm into the wall, as a rotation and depth error of the input do
@@ -727,7 +721,7 @@ def test_flush_attached_makes_a_tilted_wall_shelf_level_and_puts_its_back_on_the
 
 
 def test_flush_attached_on_a_ceiling_keeps_the_heading_and_leaves_large_errors():
-    from phiscene.assembly.faithful import flush_attached
+    from phiscene.assembly.resting import flush_attached
 
     # a 0.3 x 0.3 x 0.05 m panel fixed to the ceiling z = 2.5 (normal -z, room below), tilted 6 deg, turned 30 deg
     # about the vertical, its top 3 cm below the ceiling
@@ -778,7 +772,7 @@ def test_a_tilted_wall_shelf_is_made_flush_and_what_stands_on_it_level(work, fai
 
 
 def test_onto_start_fits_a_long_object_along_a_narrow_shelf_by_the_smallest_motion():
-    from phiscene.assembly.faithful import fitting_point, onto_start
+    from phiscene.assembly.starts import fitting_point, onto_start
 
     # a shelf top 0.6 m long (x) and 0.1 m deep (y) at z = 1.0, sampled every 5 mm; a plank 0.3 x 0.04 m lying
     # along it but 8 cm in front of it (a depth error): it fits along the shelf, so it moves straight back by
@@ -805,7 +799,7 @@ def test_onto_start_fits_a_long_object_along_a_narrow_shelf_by_the_smallest_moti
 def test_fitting_point_stays_bounded_on_a_large_densely_sampled_surface():
     import time
 
-    from phiscene.assembly.faithful import fitting_point
+    from phiscene.assembly.starts import fitting_point
 
     # a 2 x 2 m surface sampled every 5 mm with every sample doubled (zero spacing between twins), a 0.6 m square
     # footprint 1 m off its edge: the raster is capped, so this takes well under a second, and the footprint ends

@@ -13,7 +13,9 @@ import trimesh
 from scenes import convex_proxies
 
 from phiscene.assembly import AssemblyParams, ground_scene
-from phiscene.assembly.faithful import FaithfulParams, along_ray, ray_corrected, vertical_gap
+from phiscene.assembly.beneath import vertical_gap
+from phiscene.assembly.faithful import FaithfulParams
+from phiscene.assembly.starts import along_ray, ray_corrected
 from phiscene.meshes import save_mesh
 from phiscene.render import camera_eye, look_at_camera, project
 from phiscene.scene import Scene, SceneObject

@@ -34,10 +34,10 @@ yup = np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]], float)  # Y-up -> Z-up
 M = yup @ R
 verts = {i: sam[i].vertices @ M.T for i in ids}
 if table_level:  # level by the resting facet of the largest object (the table), nearest to the current down
-    from phiscene.assembly.faithful import _rotation_between, resting_normals
+    from phiscene.assembly.resting import resting_normals, rotation_between
     big = max(ids, key=lambda i: np.ptp(verts[i], axis=0).prod())
     n = resting_normals(verts[big]); k = int(np.argmax(n @ [0, 0, -1.0]))
-    Q = _rotation_between(n[k] / np.linalg.norm(n[k]), np.array([0, 0, -1.0]))
+    Q = rotation_between(n[k] / np.linalg.norm(n[k]), np.array([0, 0, -1.0]))
     print("table-level extra rotation", np.degrees(np.arccos(np.clip(n[k] @ [0, 0, -1.0] / np.linalg.norm(n[k]), -1, 1))))
     verts = {i: v @ Q.T for i, v in verts.items()}
 zmin = min(v[:, 2].min() for v in verts.values())

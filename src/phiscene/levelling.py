@@ -328,7 +328,7 @@ def resting_bottom(points: np.ndarray, max_angle_deg: float) -> float:
 
     The object (the convex hull of ``points``, a uniform solid) is turned about its centre of mass by the smallest
     rotation that makes its resting facet nearest to facing down face straight down
-    (:func:`phiscene.assembly.faithful.resting_candidates`), when that facet is within ``max_angle_deg``; else,
+    (:func:`phiscene.assembly.resting.resting_candidates`), when that facet is within ``max_angle_deg``; else,
     or when ``max_angle_deg`` is 0, it stays as it is.
 
     Parameters
@@ -344,7 +344,7 @@ def resting_bottom(points: np.ndarray, max_angle_deg: float) -> float:
     """
     from scipy.spatial import QhullError
 
-    from phiscene.assembly.faithful import resting_candidates, resting_normals
+    from phiscene.assembly.resting import resting_candidates, resting_normals
     from phiscene.proxies import capped_hull
 
     points = np.asarray(points, dtype=float)

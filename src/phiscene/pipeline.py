@@ -57,7 +57,7 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
     """phi-Scene grounding of one scene in its topology's order.
 
     ``camera_path`` is the photo's ``camera.json`` in the scene's frame, for the faithful variant's ``ray``
-    remedy (:func:`~phiscene.assembly.faithful.ray_corrected`) and its ``hidden`` remedy (the share of each
+    remedy (:func:`~phiscene.assembly.starts.ray_corrected`) and its ``hidden`` remedy (the share of each
     object the camera sees in the input, :func:`~phiscene.render.visible_shares`); without one both are skipped
     (``ray`` logged).
     """

@@ -167,3 +167,16 @@ def random_rotation(rng: np.random.Generator, max_angle: float) -> np.ndarray:
 def rotation_z(angle: float) -> np.ndarray:
     """Rotation about the world z axis (up), (3, 3)."""
     return Rotation.from_euler("z", angle).as_matrix()
+
+
+def turned_about(pose: np.ndarray, rotvec: np.ndarray, pivot: np.ndarray) -> np.ndarray:
+    """``pose`` (4, 4) turned by the rotation vector ``rotvec`` (3,, rad) about the world point ``pivot`` (3,)."""
+    from scipy.spatial.transform import Rotation
+
+    if not np.any(rotvec):
+        return pose.copy()
+    R = Rotation.from_rotvec(rotvec).as_matrix()
+    turn = np.eye(4)
+    turn[:3, :3] = R
+    turn[:3, 3] = pivot - R @ pivot
+    return turn @ pose

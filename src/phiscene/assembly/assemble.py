@@ -22,8 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
-from phiscene.assembly import faithful as fa
-from phiscene.assembly.faithful import FaithfulParams
+from phiscene.assembly import beneath, certify, guarded, resting, starts
+from phiscene.assembly.faithful import BELOW, FaithfulParams
 from phiscene.assembly.penetration import (
     PenetrationParams,
     SdfBody,
@@ -31,13 +31,9 @@ from phiscene.assembly.penetration import (
     sdf_body,
     vertical_clearance,
 )
+from phiscene.assembly.record import LOG_FORMAT, rounded
 from phiscene.assembly.settle import (
     SettleParams,
-    clear_overlaps,
-    close_gaps,
-    gives_way,
-    holds_when_tilted,
-    load_carriers,
     settle_object,
     window_motion,
 )
@@ -47,14 +43,9 @@ from phiscene.params import Params
 from phiscene.proxies import Proxy, check_proxies, with_base, with_bases
 from phiscene.scene import Scene
 from phiscene.sim.settings import SimSettings
-from phiscene.transforms import decompose, transform_points
+from phiscene.transforms import decompose, transform_points, turned_about
 
 log = logging.getLogger(__name__)
-
-#: Format tag of the assembly log.
-LOG_FORMAT = "phiscene.assembly_log/1"
-#: When no start is accepted, at most this many fallback results are tilt-tested, in rank order, for one that holds.
-FALLBACK_TILTS = 4
 
 
 @dataclass(frozen=True)
@@ -119,11 +110,6 @@ def full_order(scene: Scene, order: list[str]) -> tuple[list[str], list[str]]:
     return given + appended, appended
 
 
-def _round(v, digits: int = 9) -> float | None:
-    """``v`` rounded for the log; ``None`` for missing or non-finite values (JSON has no NaN)."""
-    return None if v is None or not np.isfinite(v) else float(round(float(v), digits))
-
-
 def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], params: AssemblyParams,
                  sim: SimSettings, cache_dir: Path, progress: Callable[[str], None] | None = None,
                  graph=None, attached: dict[str, str] | None = None,
@@ -156,7 +142,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         variant keeps; without it every object is taken to stand on the ground.
     eye : (3,) float, optional
         The photo's camera centre in the scene's frame, for the faithful remedy ``ray``
-        (:func:`~phiscene.assembly.faithful.ray_corrected`; skipped without it).
+        (:func:`~phiscene.assembly.starts.ray_corrected`; skipped without it).
     visible
         Returns object id -> share of it the photo's camera sees in the input
         (:func:`phiscene.render.visible_shares`), for the faithful remedy ``hidden``
@@ -176,10 +162,10 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         ``settle_translation``, ``settle_rotation``, ``displacement``, ``rotation_change``, ``seconds`` per
         stage) and a ``summary``; with ``params.faithful.enabled`` also ``flush_angle`` (and ``ray_shift``, m,
         with ``ray`` and ``eye``) and a
-        ``certificate`` per object (:func:`~phiscene.assembly.faithful.certificate`), and the summary lists the
+        ``certificate`` per object (:func:`~phiscene.assembly.certify.certificate`), and the summary lists the
         lost supporters, the remedies, the objects not stable in the final release (``joint_unstable``) and
         those that end a gross failure from their input (``gross``: id -> what happened,
-        :func:`~phiscene.assembly.faithful.gross_failures`; also logged as a warning and a progress line).
+        :func:`~phiscene.assembly.certify.gross_failures`; also logged as a warning and a progress line).
     """
     from phiscene.sim.bullet import BulletWorld
 
@@ -222,7 +208,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                 _fix(world if params.settle else None, oid, obj.mesh(), proxies.get(oid), pose, sim, rec,
                      masses.get(oid))
                 total, turned = window_motion(initial, pose)
-                rec.update(displacement=_round(total), rotation_change=_round(turned))
+                rec.update(displacement=rounded(total), rotation_change=rounded(turned))
                 poses[oid] = pose
                 if params.penetration:
                     placed.append(sdf_body(oid, obj.mesh(), pose, pp.n_context, pp, cache_dir))
@@ -255,8 +241,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
 
             t0 = time.perf_counter()
             if params.settle and info is not None:
-                pose = _settle_faithful(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params,
-                                        fp, info, rec, masses.get(oid))
+                pose = guarded.settle_faithful(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params,
+                                               fp, info, rec, masses.get(oid))
                 _kept(masses, bases, oid, rec, obj)
                 if rec["settle_remedy"] == "hidden":  # static where it was put from now on, as if attached
                     attached[oid] = "ground"
@@ -276,15 +262,16 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                 placed.append(sdf_body(oid, obj.mesh(), pose, pp.n_context, pp, cache_dir))
             rec["seconds"]["context"] = time.perf_counter() - t0
             total, turned = window_motion(initial, pose)
-            rec.update(displacement=_round(total), rotation_change=_round(turned))
+            rec.update(displacement=rounded(total), rotation_change=rounded(turned))
             if info is not None:
-                moved = float(np.linalg.norm(fa.com_world(pose, info["com"]) - fa.com_world(initial, info["com"])))
-                coms[oid] = info["com"]
-                rec["certificate"] = fa.certificate(
+                com = info["com"]
+                moved = float(np.linalg.norm(resting.com_world(pose, com) - resting.com_world(initial, com)))
+                coms[oid] = com
+                rec["certificate"] = certify.certificate(
                     rec["settled"], rec["settle_remedy"] or "none", info["below"], info["leaning"],
                     rec.get("touching", []),
                     moved, np.degrees(turned), info["flush_angle"], rec.get("reason", ""))
-            rec["seconds"] = {k: _round(v, 6) for k, v in rec["seconds"].items()}
+            rec["seconds"] = {k: rounded(v, 6) for k, v in rec["seconds"].items()}
             objects[oid] = rec
             if progress is not None:
                 progress(_progress_line(index, len(order), oid, rec))
@@ -303,13 +290,13 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                "unsettled": unsettled,
                "sdf_iterations": int(sum(r["sdf_iterations"] for r in objects.values())),
                "settle_frames": int(sum(r["settle_frames"] for r in objects.values())),
-               "seconds": _round(time.perf_counter() - t_start, 6)}
+               "seconds": rounded(time.perf_counter() - t_start, 6)}
     certs = {o: r["certificate"] for o, r in objects.items() if "certificate" in r}
     if certs:
         summary["supporters_lost"] = {o: c["lost"] for o, c in certs.items() if c["lost"]}
         summary["remedies"] = {o: c["remedy"] for o, c in certs.items() if c["remedy"] != "none"}
         summary["joint_unstable"] = [o for o, c in certs.items() if c.get("joint_stable") is False]
-        summary["gross"] = fa.gross_failures(certs, params.faithful)
+        summary["gross"] = certify.gross_failures(certs, params.faithful)
         summary["hidden"] = sorted(o for o, r in objects.items() if r.get("settle_remedy") == "hidden")
         for oid, what in summary["gross"].items():
             log.warning("%s ends far from its input: %s", oid, what)
@@ -326,7 +313,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
 def _flush_attached(scene: Scene, oid: str, obj, proxy: Proxy | None, holder: str, max_angle_deg: float,
                     cache_dir: Path, rec: dict) -> np.ndarray:
     """The pose (4, 4) of an attached object made flush with the wall or ceiling holding it
-    (:func:`~phiscene.assembly.faithful.flush_attached`; its input pose when the holder is not a plane of
+    (:func:`~phiscene.assembly.resting.flush_attached`; its input pose when the holder is not a plane of
     ``scene.structure``, the ground standing for an unknown wall, or is an estimated one, which is where the
     objects it comes from are), then lifted out of the floor when its mesh
     reaches at most ``ATTACH_REACH`` below it (a floor-length curtain a depth error pushed through the floor;
@@ -336,11 +323,11 @@ def _flush_attached(scene: Scene, oid: str, obj, proxy: Proxy | None, holder: st
     plane = next((q for q in scene.structure if q.id == holder and not q.estimated), None)
     out = pose if plane is None else _flushed_on(plane, obj, proxy, pose, max_angle_deg, cache_dir, rec)
     below = scene.ground_height - float(transform_points(out, np.asarray(obj.mesh().vertices))[:, 2].min())
-    lift = below if 0.0 < below <= fa.ATTACH_REACH else 0.0
+    lift = below if 0.0 < below <= resting.ATTACH_REACH else 0.0
     if lift:
         out = out.copy()
         out[2, 3] += lift
-    rec["attach_lift"] = _round(lift)
+    rec["attach_lift"] = rounded(lift)
     return out
 
 
@@ -351,15 +338,15 @@ def _shape_points(proxy: Proxy | None, mesh) -> np.ndarray:
 
 def _flushed_on(plane, obj, proxy: Proxy | None, pose: np.ndarray, max_angle_deg: float, cache_dir: Path,
                 rec: dict) -> np.ndarray:
-    """``pose`` made flush with ``plane`` (:func:`~phiscene.assembly.faithful.flush_attached`); fills ``rec``."""
+    """``pose`` made flush with ``plane`` (:func:`~phiscene.assembly.resting.flush_attached`); fills ``rec``."""
     import trimesh
 
     hull = trimesh.convex.convex_hull(_shape_points(proxy, obj.mesh()))
-    normals = _resting_normals(hull.vertices, cache_dir)
-    out, angle, shift = fa.flush_attached(pose, normals, np.asarray(hull.center_mass), hull.vertices,
+    normals = resting.cached_resting_normals(hull.vertices, cache_dir)
+    out, angle, shift = resting.flush_attached(pose, normals, np.asarray(hull.center_mass), hull.vertices,
                                           np.asarray(plane.normal, dtype=float), plane.offset, plane.kind == "wall",
                                           max_angle_deg)
-    rec.update(flush_angle=_round(angle), attach_shift=_round(shift))
+    rec.update(flush_angle=rounded(angle), attach_shift=rounded(shift))
     return out
 
 
@@ -379,18 +366,18 @@ def _faithful_start(scene: Scene, oid: str, proxy: Proxy | None, graph, poses: d
     info["fixed"] = set(attached)  # static for good: never released under a load
     carrier = next((q for q in info["below"] if q in poses), None)
     if fp.carry and carrier is not None:
-        pose = fa.carried(pose, info["com"], np.asarray(scene.get(carrier).pose, float), poses[carrier])
+        pose = starts.carried(pose, info["com"], np.asarray(scene.get(carrier).pose, float), poses[carrier])
         rec["carried_by"] = carrier
     if fp.ray and eye is not None and info["below"] and not info["leaning"]:
-        pose, shift = fa.ray_corrected(pose, info["points"], info["com"], info["below_world"], scene.ground_height,
+        pose, shift = starts.ray_corrected(pose, info["points"], info["com"], info["below_world"], scene.ground_height,
                                        eye, fp)
-        rec["ray_shift"] = _round(shift)
+        rec["ray_shift"] = rounded(shift)
     if fp.flush and info["flushable"]:
-        turned, info["flush_angle"] = fa.flush_pose(pose, info["normals"], info["com"], info["up"],
+        turned, info["flush_angle"] = resting.flush_pose(pose, info["normals"], info["com"], info["up"],
                                                     fp.max_flush_angle)
         info["flush_rotation"] = decompose(turned)[0] @ decompose(pose)[0].T  # world frame, about the centre of mass
         pose = turned
-    rec["flush_angle"] = _round(info["flush_angle"])
+    rec["flush_angle"] = rounded(info["flush_angle"])
     return pose, info
 
 
@@ -424,11 +411,11 @@ def _resolve(oid: str, mesh, pose: np.ndarray, placed: list[SdfBody], ground_hei
     """
     active = sdf_body(oid, mesh, pose, pp.n_active, pp, cache_dir)
     x, info = resolve_penetration(active, placed, ground_height, pp, planes, planar, yaw_only)
-    rec.update(sdf_planar=planar, sdf_iterations=info["iterations"], sdf_initial_loss=_round(info["initial_loss"]),
-               sdf_final_loss=_round(info["final_loss"]), sdf_searched=info["searched"],
-               sdf_translation=[_round(v) for v in x], sdf_rotation=[_round(v) for v in info["rotation"]],
+    rec.update(sdf_planar=planar, sdf_iterations=info["iterations"], sdf_initial_loss=rounded(info["initial_loss"]),
+               sdf_final_loss=rounded(info["final_loss"]), sdf_searched=info["searched"],
+               sdf_translation=[rounded(v) for v in x], sdf_rotation=[rounded(v) for v in info["rotation"]],
                sdf_context=info["context"],
-               sdf_grid_error=_round(active.scale * active.grid.error.get("max_abs", float("nan"))))
+               sdf_grid_error=rounded(active.scale * active.grid.error.get("max_abs", float("nan"))))
     out = turned_about(pose, np.asarray(info["rotation"]), np.asarray(info["pivot"]))
     out[:3, 3] += x
     return out
@@ -457,13 +444,13 @@ def _resolve_faithful(scene: Scene, oid: str, pose: np.ndarray, placed: list[Sdf
     lifted = pose.copy()
     lifted[2, 3] += lift
     near = {q: _placed_mesh(scene, q, poses, world_meshes) for q in rec["sdf_context"] if q in poses}
-    bottom = np.vstack([info["points"], sample_surface(mesh, fa.RESTING_SAMPLES, pp.seed)])
-    holders = fa.resting_on(transform_points(lifted, bottom), fa.com_world(lifted, info["com"]), near,
+    bottom = np.vstack([info["points"], sample_surface(mesh, beneath.RESTING_SAMPLES, pp.seed)])
+    holders = beneath.resting_on(transform_points(lifted, bottom), resting.com_world(lifted, info["com"]), near,
                             scene.ground_height, pp.eps + fp.contact_tol)
     if not holders:
         return out
-    rec["sdf_lifted"] = {"onto": holders, "planar_translation": [_round(v) for v in out[:3, 3] - pose[:3, 3]]}
-    rec.update(sdf_planar=False, sdf_final_loss=0.0, sdf_translation=[0.0, 0.0, _round(lift)],
+    rec["sdf_lifted"] = {"onto": holders, "planar_translation": [rounded(v) for v in out[:3, 3] - pose[:3, 3]]}
+    rec.update(sdf_planar=False, sdf_final_loss=0.0, sdf_translation=[0.0, 0.0, rounded(lift)],
                sdf_rotation=[0.0, 0.0, 0.0])
     info["below"] = holders
     info["below_world"] = {q: near[q] for q in holders}
@@ -476,19 +463,6 @@ def _placed_mesh(scene: Scene, oid: str, poses: dict[str, np.ndarray], world_mes
     if oid not in world_meshes:
         world_meshes[oid] = scene.get(oid).mesh().copy().apply_transform(poses[oid])
     return world_meshes[oid]
-
-
-def turned_about(pose: np.ndarray, rotvec: np.ndarray, pivot: np.ndarray) -> np.ndarray:
-    """``pose`` (4, 4) turned by the rotation vector ``rotvec`` (3,, rad) about the world point ``pivot`` (3,)."""
-    from scipy.spatial.transform import Rotation
-
-    if not np.any(rotvec):
-        return pose.copy()
-    R = Rotation.from_rotvec(rotvec).as_matrix()
-    turn = np.eye(4)
-    turn[:3, :3] = R
-    turn[:3, 3] = pivot - R @ pivot
-    return turn @ pose
 
 
 def _on_the_floor(mesh, pose: np.ndarray, info: dict, ground_height: float, reach: float) -> bool:
@@ -512,9 +486,9 @@ def _settle(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: SimSetti
     world.set_static(oid)
     moved, turned = window_motion(pose, result.pose)
     rec.update(settle_frames=result.frames, settled=result.settled, settle_remedy=result.remedy,
-               residual_translation=_round(result.residual_translation, 12),
-               residual_rotation=_round(result.residual_rotation, 12),
-               settle_translation=_round(moved), settle_rotation=_round(turned))
+               residual_translation=rounded(result.residual_translation, 12),
+               residual_rotation=rounded(result.residual_rotation, 12),
+               settle_translation=rounded(moved), settle_rotation=rounded(turned))
     return result.pose
 
 
@@ -548,7 +522,7 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
         edges = []
     parents = [e.source for e in edges] or ["ground"]
     leaning = any(e.relation == "leans_on" for e in edges)
-    below = [e.source for e in edges if e.relation in fa.BELOW] or (["ground"] if not edges else [])
+    below = [e.source for e in edges if e.relation in BELOW] or (["ground"] if not edges else [])
     mesh = obj.mesh()
     _, _, scale = decompose(obj.pose)
     points = _shape_points(proxy, mesh)
@@ -561,9 +535,9 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
         elif p in poses:
             parents_world[p] = _placed_mesh(scene, p, poses, world_meshes)
     world_mesh = hull.copy().apply_transform(np.asarray(obj.pose, dtype=float))
-    up = fa.support_normal(world_mesh, parents_world)
+    up = resting.support_normal(world_mesh, parents_world)
     flushable = not leaning and bool(below)
-    normals = _resting_normals(hull.vertices, cache_dir) if flushable else np.zeros((0, 3))
+    normals = resting.cached_resting_normals(hull.vertices, cache_dir) if flushable else np.zeros((0, 3))
     leaning_ids = [e.source for e in edges if e.relation == "leans_on"]
     return {"parents": parents, "below": below, "leaning": leaning_ids, "up": up, "normals": normals, "com": com,
             "flushable": flushable, "given_base": obj.base is not None, "flush_angle": 0.0,
@@ -574,362 +548,15 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
             "points": points, "below_world": parents_world}
 
 
-#: Part of the key of the cached resting normals: changed when :func:`~phiscene.assembly.faithful.resting_normals`
-#: answers differently for the same hull.
-RESTING_VERSION = b"v2"
-
-
-def _resting_normals(hull_points: np.ndarray, cache_dir: Path, com: np.ndarray | None = None) -> np.ndarray:
-    """:func:`~phiscene.assembly.faithful.resting_normals` of a hull (k, 3) with centre of mass ``com`` (3,)
-    (default the uniform solid's), cached in ``cache_dir/resting`` by the hull's vertices, ``com`` and
-    :data:`RESTING_VERSION`."""
-    import hashlib
-
-    from phiscene.atomic import atomic_path
-
-    points = np.ascontiguousarray(hull_points, dtype=float)
-    extra = (b"" if com is None else b"com" + np.ascontiguousarray(com, dtype=float).tobytes()) + RESTING_VERSION
-    key = hashlib.sha256(points.tobytes() + str(points.shape).encode() + extra).hexdigest()[:20]
-    path = Path(cache_dir) / "resting" / f"{key}.npy"
-    if path.exists():
-        try:
-            cached = np.load(path)
-            if cached.ndim == 2 and cached.shape[1] == 3:
-                return cached
-        except (OSError, ValueError):
-            pass  # unreadable: recompute and rewrite
-    normals = fa.resting_normals(points, com)
-    with atomic_path(path) as tmp:
-        np.save(tmp, normals)
-    return normals
-
-
 def _surfaces(scene: Scene, poses: dict[str, np.ndarray], names: list[str], seed: int,
               cache: dict[str, np.ndarray]) -> np.ndarray:
     """Upward surface samples (k, 3) of the placed objects ``names`` at their grounded poses (cached per id)."""
     for q in names:
         if q not in cache:
-            cache[q] = fa.upward_samples(scene.get(q).mesh().copy().apply_transform(poses[q]), fa.ONTO_SAMPLES,
+            cache[q] = starts.upward_samples(scene.get(q).mesh().copy().apply_transform(poses[q]), starts.ONTO_SAMPLES,
                                          seed)
     parts = [cache[q] for q in names]
     return np.vstack(parts) if parts else np.zeros((0, 3))
-
-
-def _settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: SimSettings, sp: SettleParams,
-                     fp: FaithfulParams, info: dict, rec: dict, com: np.ndarray | None = None) -> np.ndarray:
-    """Guarded settling (see :mod:`phiscene.assembly.faithful`); fills ``rec``; returns the frozen pose.
-
-    Every start (the corrected pose, then that pose moved out of proxy overlaps (``clear``), then the nearest
-    resting poses, then a damped run, then the pose moved onto the
-    nearest supporting surface, then horizontal shifts when every start so far went farther than ``max_shift`` or
-    lost its supporters, or none came to rest level) is lowered onto what lies beneath and settled with the paper's
-    settling; the first result within the slide/drop/turn bounds that keeps the graph's supporters is taken, else,
-    avoiding gross failures (turned past ``max_stable_angle`` or moved past ``onto_reach``) where a start did, the
-    closest settled one that stayed in place (on its supporters if one did), else the closest. The final pose is
-    always the outcome of free settling.
-
-    The body has the declared centre of mass ``com`` (3,) local, if any. When no start came to rest level, one
-    more start with its centre of mass declared lower (from the photo's orientation, the corrected pose with the
-    flush turn undone, when that turn exceeded ``max_turn``; remedy ``ballast``,
-    :func:`~phiscene.assembly.faithful.ballast_com`) comes before the shifted ones; accepted, ``rec`` gets
-    ``ballast`` (``com``: the declared centre, local; ``lowered``: m), else the body is a uniform solid again.
-    """
-    from phiscene.inertia import rigid_props
-
-    scale = decompose(pose)[2]
-    props = rigid_props(mesh, proxy.hulls, sim.density, scale, com)
-    world.add_body(oid, proxy.hulls, pose, props)
-    context = [b for b in world.bodies if b != oid]
-
-    def touching() -> list[str]:
-        return sorted(world.distances(oid, context, fp.contact_tol))
-
-    tried: list[dict] = []
-    own = props.com / scale  # its centre of mass as it came (local, unscaled)
-    # the centre of mass the body in the world has (declared, local; None: uniform), and its completed base
-    body = {"com": com, "base": None}
-
-    def mass(declared: np.ndarray | None, base: np.ndarray | None = None) -> None:
-        # the body again, with another centre of mass (and completed base, remedy base)
-        if declared is not body["com"] or base is not body["base"]:
-            hulls = with_base(proxy, base).hulls
-            world.remove_body(oid)
-            world.add_body(oid, hulls, pose, rigid_props(mesh, hulls, sim.density, scale, declared))
-            body.update(com=declared, base=base)
-
-    def attempt(label: str, start: np.ndarray, damped: bool = False, origin: np.ndarray | None = None) -> dict:
-        # origin: where the slide bound is measured from (a shifted start: the start itself)
-        origin = pose if origin is None else origin
-        lowered = _lowered(world, oid, start, context, fp.contact_tol / 2)
-        # lowered farther than onto_reach: nothing it could stand on was beneath it (beside its shelf); a fall
-        fell = float(start[2, 3] - lowered[2, 3])
-        fell = fell if 0 < fp.onto_reach < fell else 0.0
-        start = lowered
-        world.set_pose(oid, start)
-        frames = 0
-        if damped:
-            world.set_dynamics(oid, linearDamping=fp.retry_damping, angularDamping=fp.retry_damping,
-                               rollingFriction=fp.retry_rolling_friction, spinningFriction=fp.retry_rolling_friction)
-            first = settle_object(world, oid, sp)
-            world.restore_dynamics(oid)
-            frames += first.frames
-            world.set_pose(oid, first.pose)  # at rest; then normal settings decide whether it stays
-        result = settle_object(world, oid, sp)
-        frames += result.frames
-        ok, moved, turned = fa.within_bounds(origin, result.pose, info["com"], info["diag"], fp, start=lowered)
-        if fell:
-            ok, moved = False, max(moved, fell)
-        near = touching()
-        lost = fa.lost_supporters(info["below"], info["leaning"], near)
-        # in place: within the bounds, still leaning where it leans (the graph may name the wrong supporter
-        # from below: an object that rests where it was put, on something else, is in place all the same)
-        in_place = ok and not any(p in lost for p in info["leaning"])
-        robust = True  # tested only where it decides: a settled result in place (the fallback: below)
-        tested = result.settled and in_place and fp.tilt_test > 0 and not info["leaning"]  # leaning: friction
-        if tested:
-            robust, spent = holds_when_tilted(world, oid, fp.tilt_test, fp.tilt_frames, fp.joint_tol,
-                                              fp.joint_tol_deg, sp)
-            frames += spent
-        gave: list[str] = []  # the placed objects it touches (and their supporters), released under it, hold it
-        if result.settled and in_place and robust and fp.load_frames > 0:
-            carriers = load_carriers(world, oid, near, info["fixed"], fp.contact_tol, fp.load_depth)
-            if carriers:
-                gave, spent = gives_way(world, oid, carriers, fp.load_frames, fp.joint_tol, fp.joint_tol_deg, sp)
-                frames += spent
-        whys = ["" if ok else f"moved {moved:.3f} m / {turned:.1f} deg",
-                f"lost supporters {lost}" if lost else "", "" if result.settled else "not settled",
-                "" if robust else f"marginal: tips when tilted {fp.tilt_test:g} deg",
-                f"gives way when released: {gave}" if gave else ""]
-        stayed = ok and not lost
-        # a gross failure: turned beyond any resting pose tried, or went farther than the onto remedy moves
-        gross = fa.gross_failure(moved, turned, fp)
-        out = {"label": label, "result": result, "frames": frames, "gross": gross, "turned": turned,
-               "ok": stayed and result.settled and robust and not gave, "lost": bool(lost), "robust": robust,
-               "loaded": not gave,
-               "stayed": stayed, "in_place": in_place, "travel": moved if not lost else math.inf,
-               "cost": fa.closeness(pose, result.pose, info["com"], info["diag"], start=lowered) + fell,
-               "why": "; ".join(w for w in whys if w), "touching": near, "com": body["com"], "base": body["base"],
-               "tilt_tested": tested}
-        tried.append(out)
-        return out
-
-    def holds(t: dict) -> bool:
-        # tilt-test a settled result where it came to rest, with the body it had (once): whether it holds
-        if not t["tilt_tested"] and fp.tilt_test > 0:
-            mass(t["com"], t["base"])
-            world.set_pose(oid, t["result"].pose)
-            t["tilt_tested"] = True
-            t["robust"], spent = holds_when_tilted(world, oid, fp.tilt_test, fp.tilt_frames, fp.joint_tol,
-                                                   fp.joint_tol_deg, sp)
-            t["frames"] += spent
-            if not t["robust"]:
-                t["why"] = "; ".join(w for w in (t["why"], f"marginal: tips when tilted {fp.tilt_test:g} deg") if w)
-        return t["robust"]
-
-    best = attempt("none", pose)
-    if not best["ok"] and fp.clear:
-        # out of what it neither stands nor leans on, where its convex pieces overlap it (its mesh is clear of
-        # it): the simulator shoves it out at once; the remaining starts are taken from there
-        holders = {"ground", *info["below"], *info["leaning"]}
-        world.set_pose(oid, pose)
-        shift = clear_overlaps(world, oid, [b for b in context if b not in holders], fp.contact_tol, fp.max_shift)
-        if shift is not None:
-            pose = pose.copy()
-            pose[:3, 3] += shift
-            rec["proxy_clear"] = [_round(v) for v in shift]
-            best = attempt("clear", pose)
-    if not best["ok"] and fp.lean and info["leaning"]:
-        # short of what it leans on (depth error): lowered, then moved sideways until it touches it
-        lowered = _lowered(world, oid, pose, context, fp.contact_tol / 2)
-        world.set_pose(oid, lowered)
-        shift = close_gaps(world, oid, info["leaning"], fp.contact_tol, fp.contact_tol / 2, fp.onto_reach)
-        if shift is not None:
-            start = lowered.copy()
-            start[:3, 3] += shift
-            rec["lean_shift"] = [_round(v) for v in shift]
-            best = attempt(f"lean {np.linalg.norm(shift):.3f} m", start, origin=start)
-    if not best["ok"]:
-        starts = fa.resting_candidates(pose, info["normals"], info["com"], info["up"], fp.max_stable_angle)
-        for start, angle in [c for c in starts if c[1] > 0.5][: fp.max_candidates]:
-            if attempt(f"stable {angle:.1f} deg", start)["ok"]:
-                break
-        if not any(t["ok"] for t in tried):
-            attempt("damped", pose, damped=True)
-        if not any(t["ok"] or (t["in_place"] and t["result"].settled and t["robust"] and t["loaded"])
-                   for t in tried) and fp.onto_reach > 0:
-            # fell or slid off every time, only balances on an edge or its carriers give way under it: its input
-            # is off its supporter or over its edge (depth error); move it onto the nearest supporting surface,
-            # inside its edge (the graph may name the wrong supporter), from where the input put it: carried
-            # by a supporter the graph got wrong, it may have gone far. Any surface nearer than where it went
-            # anyway (a can over nothing falls a metre to the floor; the wall shelf its depth error took it off
-            # is 31 cm away) is nearer to the input than that
-            here = pose.copy()
-            here[:3, 3] += fa.com_world(info["input"], info["com"]) - fa.com_world(pose, info["com"])
-            points = transform_points(here, info["points"])
-            went = [t["travel"] for t in tried if math.isfinite(t["travel"])]
-            reach = max(fp.onto_reach, min(went)) if went else fp.onto_reach
-            onto = fa.onto_start(here, info["com"], points, info["surfaces"](info["placed"]), reach,
-                                 fp.contact_tol / 2, info["walls"])
-            if onto is not None and onto[1] > 1e-3:
-                attempt(f"onto {onto[1]:.3f} m", onto[0], origin=onto[0])
-        if fp.ballast and not any(t["ok"] for t in tried) and all(
-                t["turned"] > fp.max_turn or not t["result"].settled or not t["robust"] for t in tried):
-            # none came to rest level: at rest in the photo, so not a uniform solid (flowers outweighing a vase).
-            # A flush within the turn bound corrects the input's rotation error; a larger one was chosen for the
-            # uniform solid and contradicts the photo, which shows the object at rest: that turn undone
-            points = info["points"]  # its convex pieces' vertices (local)
-            undone = info["flush_angle"] > fp.max_turn
-            start = _unflushed(world, oid, pose, info, context, fp.contact_tol / 2) if undone else pose
-            declared = fa.ballast_com(start, own, points, fp.ballast_height)
-            angle = 0.0  # the flush turn of these starts (from the photo's orientation when undone)
-            if declared is not None and fp.flush and info["flushable"]:
-                # flush on the facet it rests on with that centre of mass (a vase's base is no resting facet of
-                # the uniform solid), then the centre over that base
-                start, angle = fa.flush_pose(start, _resting_normals(points, info["cache_dir"], declared), declared,
-                                             info["up"], fp.max_flush_angle)
-                if angle > 0:
-                    declared = fa.ballast_com(start, own, points, fp.ballast_height)
-            if declared is not None:
-                mass(declared)
-                t = attempt("ballast", start, origin=start)
-                if undone:
-                    t["flush"] = angle
-                if not t["ok"]:  # the flush is a correction, as for none
-                    mass(com)  # the other starts as it came; the ballast result may still be the closest
-            if fp.base and info["flushable"] and not info["given_base"] and not any(t["ok"] for t in tried) \
-                    and not _rests(tried, fa.slide_bound(info["diag"], fp), holds):
-                mass(com)  # the body as it came (a tilt test may have changed it)
-                # nor with its mass low, and no start came to rest where it was put, however turned (a can
-                # tilted by a rotation error stands upright on its bottom, a resting pose 28 deg away): its
-                # bottom is a guess that cannot stand (a jug, a fruit guessed round underneath); complete it
-                # flat where it stands, level, with its mass as low
-                declared = com if declared is None else declared
-                flat = fa.flat_base(start, proxy.hulls, own if declared is None else declared, info["up"],
-                                    fp.tilt_test)
-                if flat is not None:
-                    mass(declared, flat[0])
-                    t = attempt(f"base {flat[1]:g}", start, origin=start)
-                    if undone:
-                        t["flush"] = angle
-                    if not t["ok"]:
-                        mass(com)
-            elif not any(t["ok"] for t in tried):
-                mass(com)  # the body as it came (a tilt test may have changed it)
-        travelled = min(t["travel"] for t in tried)
-        # every start went far, or none came to rest level (tipped over, or still moving: a book whose depth error
-        # put it over its supporter's edge): one nearby
-        tipped = all(t["turned"] > fp.max_turn or not t["result"].settled for t in tried)
-        if (travelled > fp.max_shift or tipped) and not any(t["ok"] for t in tried):
-            step = fa.slide_bound(info["diag"], fp)
-            for r, ring in fa.shifted_starts(pose, step, fp.max_shift, fp.shift_directions):
-                # nearest ring first; stop at an accepted start, or after a ring
-                done = [attempt(f"shifted {r:.3f} m", s, origin=s) for s in ring]  # where one rests in place
-                if any(t["ok"] for t in done) or any(t["in_place"] and t["result"].settled for t in done):
-                    break
-    ok = [t for t in tried if t["ok"]]
-    if not ok and fp.tilt_test > 0 and not info["leaning"]:
-        # the fallback: tilt-test the settled results in rank order (only those in place were tested), up to
-        # the first that holds; one that only balances would roll off at the first disturbance
-        for t in sorted(tried, key=fa.fallback_rank)[:FALLBACK_TILTS]:
-            if t["gross"] or not t["result"].settled or t["tilt_tested"]:
-                continue
-            if holds(t):
-                break
-    best = ok[0] if ok else min(tried, key=fa.fallback_rank)
-    share = info["visible"]() if not ok and info.get("visible") is not None else None
-    if share is not None and share < fp.hidden_share:  # nan (outside the image): no
-        # mostly unseen, and its guessed shape held by no start: kept where it was put, on what lies beneath it,
-        # unless the fallback ends nearer to the input (the corrected pose may have been carried far, or fall far
-        # when lowered), nothing is beneath it, or the placed objects it touches, released, do not stay (static,
-        # it would shove them: its convex pieces may reach into them)
-        mass(com)
-        kept = _lowered(world, oid, pose, context, fp.contact_tol / 2)
-        world.set_pose(oid, kept)
-        near = touching()
-        far = lambda p: fa.closeness(info["input"], p, info["com"], info["diag"], start=info["input"])  # noqa: E731
-        world.set_static(oid)
-        carriers = load_carriers(world, oid, near, info["fixed"], fp.contact_tol, fp.load_depth)
-        if near and far(kept) < far(best["result"].pose) and not (
-                carriers and gives_way(world, oid, carriers, fp.load_frames, fp.joint_tol, fp.joint_tol_deg, sp)[0]):
-            rec["touching"] = near
-            moved, turned = window_motion(pose, kept)
-            reason = "; ".join(f"{t['label']}: {t['why']}" for t in tried)
-            rec.update(settle_frames=sum(t["frames"] for t in tried), settled=True, settle_remedy="hidden",
-                       residual_translation=0.0, residual_rotation=0.0, settle_translation=_round(moved),
-                       settle_rotation=_round(turned), reason=f"{reason}; kept: {share:.0%} visible",
-                       attempts=len(tried), visible_share=_round(share))
-            return kept
-    result = best["result"]
-    if "flush" in best:  # started from the photo's orientation: the flush of _faithful_start undone
-        info["flush_angle"] = best["flush"]
-        rec["flush_angle"] = _round(best["flush"])
-    if not best["ok"]:
-        remedy = "closest"
-    else:
-        remedy = result.remedy if best["label"] == "none" else best["label"].split()[0]
-    reason = "; ".join(f"{t['label']}: {t['why']}" for t in tried if t is not best or not best["ok"])
-    final = result.pose
-    mass(best["com"], best["base"])
-    if best["com"] is not None and best["com"] is not com and best["label"].split()[0] in ("ballast", "base"):
-        # declared by the remedy (a base start keeps the input's own declared centre when the ballast had none)
-        lowered = fa.com_world(final, own)[2] - fa.com_world(final, best["com"])[2]
-        rec["ballast"] = {"com": [_round(v, 12) for v in best["com"]], "lowered": _round(lowered)}
-    if best["base"] is not None:
-        rec["base"] = {"points": np.asarray(best["base"]).round(12).tolist(), "share": float(best["label"].split()[1])}
-    world.set_pose(oid, final)
-    rec["touching"] = best["touching"]
-    world.set_static(oid)
-    moved, turned = window_motion(pose, final)
-    rec.update(settle_frames=sum(t["frames"] for t in tried), settled=result.settled, settle_remedy=remedy,
-               residual_translation=_round(result.residual_translation, 12),
-               residual_rotation=_round(result.residual_rotation, 12),
-               settle_translation=_round(moved), settle_rotation=_round(turned), reason=reason,
-               attempts=len(tried))
-    return final
-
-
-def _unflushed(world, oid: str, pose: np.ndarray, info: dict, below: list[str], clearance: float) -> np.ndarray:
-    """``pose`` with the flush turn of :func:`_faithful_start` (``info["flush_rotation"]``) undone about the centre
-    of mass, raised out of ``below`` (and the ground) where the turn takes it into them, to ``clearance`` (m)."""
-    from scipy.spatial.transform import Rotation
-
-    back = Rotation.from_matrix(info["flush_rotation"].T).as_rotvec()
-    out = turned_about(pose, back, fa.com_world(pose, info["com"]))
-    world.set_pose(oid, out)
-    gaps = world.distances(oid, _stoppers(world, below), clearance)
-    if gaps and min(gaps.values()) < 0:
-        out[2, 3] += clearance / 2 - min(gaps.values())
-    return out
-
-
-def _rests(tried: list[dict], bound: float, holds: Callable[[dict], bool]) -> bool:
-    """Whether a start of ``tried`` (the attempts of :func:`_settle_faithful`) came to rest where it was put, however
-    turned: settled, its centre of mass within ``bound`` (m) of its start, and ``holds`` (tilt-tested) it."""
-    return any(t["result"].settled and t["travel"] <= bound and holds(t) for t in tried)
-
-
-def _stoppers(world, below: list[str]) -> list[str]:
-    """What a body moved straight up or down meets: ``below``, and the ground whatever the graph says."""
-    return list(dict.fromkeys([*below, *(["ground"] if "ground" in world.bodies else [])]))
-
-
-def _lowered(world, oid: str, pose: np.ndarray, below: list[str], clearance: float) -> np.ndarray:
-    """``pose`` moved straight down until within ``clearance`` of the nearest of ``below`` (or of the ground).
-
-    Each step lowers by the Euclidean gap (a lower bound of the vertical gap), so it never penetrates. The ground
-    always stops it: a supporter that is no longer beneath the object (it moved, or the graph was wrong) must not
-    let it sink through the floor.
-    """
-    stoppers = _stoppers(world, below)
-    out = pose.copy()
-    for _ in range(8):
-        world.set_pose(oid, out)
-        gaps = world.distances(oid, stoppers, 1.0)
-        gap = min(gaps.values()) if gaps else 0.0
-        if gap <= clearance:
-            break
-        out[2, 3] -= gap - clearance / 2
-    return out
 
 
 def _keep(store: dict[str, np.ndarray], oid: str, chosen, given: np.ndarray | None) -> None:
@@ -985,15 +612,15 @@ def _joint_settle(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, cac
     poses = {o.id: np.asarray(o.pose, dtype=float) for o in settled.objects}
     for oid, entry in log_["objects"].items():
         rec = objects[oid]
-        rec["joint_settle"] = [_round(entry["displacement"]), _round(np.degrees(entry["rotation_change"]), 6)]
+        rec["joint_settle"] = [rounded(entry["displacement"]), rounded(np.degrees(entry["rotation_change"]), 6)]
         total, turned = window_motion(inputs[oid], poses[oid])
-        rec.update(displacement=_round(total), rotation_change=_round(turned))
+        rec.update(displacement=rounded(total), rotation_change=rounded(turned))
         cert = rec.get("certificate")
         if cert is not None:
             com = coms[oid]
-            cert["displacement"] = _round(float(np.linalg.norm(fa.com_world(poses[oid], com)
-                                                               - fa.com_world(inputs[oid], com))))
-            cert["rotation_change"] = _round(np.degrees(turned), 6)
+            cert["displacement"] = rounded(float(np.linalg.norm(resting.com_world(poses[oid], com)
+                                                               - resting.com_world(inputs[oid], com))))
+            cert["rotation_change"] = rounded(np.degrees(turned), 6)
             if entry["displacement"] > fp.joint_tol or np.degrees(entry["rotation_change"]) > fp.joint_tol_deg:
                 cert["remedy"] = f"{cert['remedy']}+joint"
     log.info("joint settling: %d frames, %s", log_["frames"],
@@ -1049,10 +676,10 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
             if params.penetration:
                 placed = [sdf_body(q, scene.get(q).mesh(), p, pp.n_context, pp, cache_dir) for q, p in context.items()]
                 pose = _resolve_faithful(scene, oid, pose, placed, context, {}, pp, fp, cache_dir, rec, info)
-            new = _settle_faithful(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params, fp, info,
-                                   rec, obj.com)
-        closer = (fa.closeness(initial, new, info["com"], info["diag"])
-                  < fa.closeness(initial, poses[oid], info["com"], info["diag"]))
+            new = guarded.settle_faithful(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params, fp,
+                                          info, rec, obj.com)
+        closer = (certify.closeness(initial, new, info["com"], info["diag"])
+                  < certify.closeness(initial, poses[oid], info["com"], info["diag"]))
         objects[oid]["reground"] = {"kept": bool(closer), "settled": rec["settled"], "remedy": rec["settle_remedy"],
                                     "reason": rec.get("reason", ""), "attempts": rec.get("attempts", 0)}
         if progress is not None:
@@ -1086,5 +713,5 @@ def _joint_check(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, cach
     for oid, d in drift["objects"].items():
         cert = objects[oid].get("certificate")
         if cert is not None:
-            cert["joint_drift"] = [_round(d["drift_trans"]), _round(d["drift_rot"], 6)]
+            cert["joint_drift"] = [rounded(d["drift_trans"]), rounded(d["drift_rot"], 6)]
             cert["joint_stable"] = bool(d["drift_trans"] <= fp.joint_tol and d["drift_rot"] <= fp.joint_tol_deg)
