@@ -220,3 +220,15 @@ def test_threads_do_not_change_the_result(tmp_path):
     assert (outs[0] / "scene.json").read_bytes() == (outs[1] / "scene.json").read_bytes()
     res = phiscene("--threads", "0", "ground", str(tmp_path / "in"), str(tmp_path / "out0"), cwd=tmp_path)
     assert res.returncode == 2 and "--threads: must be at least 1" in res.stderr
+
+
+def test_bench_command_refuses_a_suite_no_generator_builds(tmp_path):
+    """`phiscene bench --suite real` (a real-data suite) and a suite of an unknown name: one line, no traceback."""
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text("suites:\n  foo: {n_scenes: 1}\n  real: {source: {kind: rest3d, root: data/REST3D}}\n")
+    for suite in ("foo", "real"):
+        res = phiscene("bench", str(tmp_path / "out"), "--suite", suite, "--config", str(cfg), cwd=tmp_path)
+        assert res.returncode != 0 and "Traceback" not in res.stderr, res.stderr
+        assert f"--suite {suite!r}: not built by an embedded benchmark generator (known: clutter, contact, rooms" \
+            in res.stderr, res.stderr
+    assert not (tmp_path / "out").exists()

@@ -24,6 +24,7 @@ from phiscene.config import (
     method_params,
     scaling_settings,
     schema_sections,
+    suite_generator,
 )
 from phiscene.params import Params, nested_params
 from phiscene.topology import get_backend
@@ -119,6 +120,52 @@ def test_grounding_job_receives_the_deep_merged_override(tmp_path):
     assert {k: got["penetration_params"][k] for k in want_pen} == want_pen
     assert {k: got["settle_params"][k] for k in CONFIG["assembly"]["settle_params"]} == \
         CONFIG["assembly"]["settle_params"]
+
+
+@pytest.mark.workflow
+def test_a_suite_of_another_name_built_by_a_generator_gets_its_scenes(tmp_path):
+    """`suites.<name>.generator`: a suite named otherwise, built by the contact generator with the same seed, holds
+    the contact suite's scene to the byte (ground truth, meshes and initial scene), beside it in the same results/."""
+    overrides = {"suites": {"contact": {"n_scenes": 1}, "contact_b": {"generator": "contact", "n_scenes": 1}},
+                 "proxies": {"backend": "convex"},
+                 "benchmark": {"n_objects": [2, 2], "render": {"width": 64, "height": 48}}}
+    cfg = tmp_path / "override.yaml"
+    cfg.write_text(yaml.safe_dump(overrides))
+    targets = [f"results/scenes/{s}/scene_000/initial/scene.json" for s in ("contact", "contact_b")]
+    cmd = [sys.executable, "-m", "snakemake", "-s", str(ROOT / "Snakefile"), "--directory", str(tmp_path / "run"),
+           "-j2", "--configfile", str(cfg), "--", *targets]
+    res = subprocess.run(cmd, cwd=ROOT, env={**os.environ, "PYTHONHASHSEED": "0"}, capture_output=True, text=True,
+                         timeout=600)
+    assert res.returncode == 0, res.stderr[-3000:]
+    a, b = (tmp_path / "run/results/scenes" / s / "scene_000" for s in ("contact", "contact_b"))
+    files = sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file() and p.suffix in (".json", ".glb", ".obj"))
+    assert any(f.parts[0] == "meshes" for f in files) and Path("gt/scene.json") in files
+    for f in files:
+        assert (a / f).read_bytes() == (b / f).read_bytes(), f
+
+
+def test_a_suite_names_its_generator_and_an_unknown_one_is_refused():
+    config = copy.deepcopy(CONFIG)
+    config["suites"]["foo"] = {"n_scenes": 2}
+    with pytest.raises(ConfigError, match=r"^config: suites.foo: no embedded benchmark generator 'foo' \(known: "
+                                          r"clutter, contact, rooms\); a suite of another name says which builds it"):
+        check_config(config)
+    config["suites"]["foo"] = {"n_scenes": 2, "generator": "room"}
+    with pytest.raises(ConfigError, match=r"^config: suites.foo: no embedded benchmark generator 'room' \(known: "):
+        check_config(config)
+    config["suites"]["foo"] = {"generator": "rooms", "source": {"kind": "front3d", "root": "x"}}
+    with pytest.raises(ConfigError, match=r"^config: suites.foo: `generator` and `source` exclude each other"):
+        check_config(config)
+    config["suites"]["foo"] = {"n_scenes": 2, "generator": "rooms"}
+    check_config(config)
+    assert suite_generator(config, "foo") == "rooms" and suite_generator(config, "contact") == "contact"
+
+
+def test_the_heldout_config_passes_schema_and_classes():
+    config = deep_merge(CONFIG, yaml.safe_load((ROOT / "config/heldout.yaml").read_text()))
+    check_config(config)
+    jsonschema.validate(config, SCHEMA)
+    assert {suite_generator(config, s) for s in ("contact_f", "rooms_f")} == {"contact", "rooms"}
 
 
 # ---------------------------------------------------------------------------------------------------- checks

@@ -152,11 +152,18 @@ def cmd_metrics(args: argparse.Namespace) -> None:
 
 def cmd_bench(args: argparse.Namespace) -> None:
     from phiscene.bench.build import build_scene
+    from phiscene.config import suite_generator
 
     cfg = _config(args.config)
     params = _bench_settings(cfg, args.suite)
     cache = Path(args.cache_dir or cfg.get("cache_dir", Path(args.out_dir) / "cache"))
-    build_scene(Path(args.out_dir), args.suite, args.index, params, cache)
+    from phiscene.bench.templates import TEMPLATES
+
+    generator = suite_generator(cfg, args.suite)
+    if generator not in TEMPLATES or "source" in cfg["suites"][args.suite]:
+        raise PhisceneError(f"--suite {args.suite!r}: not built by an embedded benchmark generator (known: "
+                            f"{', '.join(sorted(TEMPLATES))}; a suite of another name gives `generator:`)")
+    build_scene(Path(args.out_dir), generator, args.index, params, cache)
     print(f"wrote {args.out_dir}")
 
 

@@ -41,7 +41,7 @@ from phiscene.params import nested_params
 
 __all__ = ["METHOD_PARAMS", "SECTIONS", "SOURCE_PARAMS", "ConfigError", "bench_settings", "check_config",
            "check_params", "deep_merge", "load_class", "method_assembly", "method_params", "packaged_config_path",
-           "schema_sections"]
+           "schema_sections", "suite_generator", "suite_proxies"]
 
 def packaged_config_path() -> Path:
     """The workflow's ``config/config.yaml`` as shipped with the package (``phiscene/defaults/config.yaml``, a link
@@ -141,6 +141,17 @@ def suite_proxies(config: Mapping[str, Any], suite: str | None = None) -> dict:
     CoACD search for 30k-face reconstructions); ``suite=None`` gives ``proxies`` alone.
     """
     return deep_merge(config.get("proxies"), (config["suites"][suite].get("proxies") if suite else None))
+
+
+def suite_generator(config: Mapping[str, Any], suite: str) -> str:
+    """The embedded benchmark generator that builds a suite's scenes (a key of
+    :data:`phiscene.bench.templates.TEMPLATES`: ``contact``, ``rooms``, ``clutter``).
+
+    ``suites.<suite>.generator``, else the suite's own name. A suite of another name built by one of them (a
+    held-out seed or another degradation, beside the default suites in the same ``results/``) names it; the same
+    generator, seed and scene index give the same ground truth whatever the suite is called.
+    """
+    return str(config["suites"][suite].get("generator", suite))
 
 
 def bench_settings(config: Mapping[str, Any], suite: str) -> dict:
@@ -260,6 +271,7 @@ def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -
             check_params(load_class(spec), value, path)
 
     from phiscene.bench.build import BenchParams, with_suite_defaults
+    from phiscene.bench.templates import TEMPLATES
 
     for suite, spec in _mapping(config.get("suites"), "suites").items():
         spec = _mapping(spec, f"suites.{suite}")
@@ -267,6 +279,9 @@ def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -
             check_params(load_class(SECTIONS["proxies"]), deep_merge(config.get("proxies") or {}, spec["proxies"]),
                          f"suites.{suite}.proxies")
         if "source" in spec:
+            if "generator" in spec:
+                raise ConfigError(f"config: suites.{suite}: `generator` and `source` exclude each other (a suite "
+                                  "is built by an embedded generator or read from real data)")
             source = _mapping(spec["source"], f"suites.{suite}.source")
             kind = source.get("kind")
             if kind not in SOURCE_PARAMS:
@@ -274,8 +289,14 @@ def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -
                                   f"(known: {', '.join(sorted(SOURCE_PARAMS))})")
             check_params(load_class(SOURCE_PARAMS[kind]), source, f"suites.{suite}.source")
         else:
+            generator = suite_generator(config, suite)
+            if generator not in TEMPLATES:
+                hint = "" if "generator" in spec else ("; a suite of another name says which builds it "
+                                                       "(`generator: <one of them>`)")
+                raise ConfigError(f"config: suites.{suite}: no embedded benchmark generator {generator!r} (known: "
+                                  f"{', '.join(sorted(TEMPLATES))}){hint}, or give a real-data `source`")
             check_params(BenchParams, spec.get("benchmark"), f"suites.{suite}.benchmark")
-            merged = with_suite_defaults(suite, bench_settings(config, suite))
+            merged = with_suite_defaults(generator, bench_settings(config, suite))
             check_params(BenchParams, merged, f"suites.{suite}.benchmark")
 
     from phiscene.topology import backend_names, get_backend

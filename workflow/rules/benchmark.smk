@@ -13,6 +13,7 @@ rule benchmark_scene:
         suite=alternation(benchmark_suites()),
     params:
         index=scene_index,
+        generator=suite_generator,
         bench=benchmark_settings,
         cache_dir=CACHE,
         version=V.BENCHMARK,

@@ -88,6 +88,11 @@ def sam3d_camera_scenes(suite):
     return [s for s in scene_ids(suite) if sam3d_has_camera(suite, s)]
 
 
+def suite_generator(wildcards):
+    """The embedded generator of a benchmark job's suite (`suites.<suite>.generator`, default its name)."""
+    return phiscene.config.suite_generator(config, wildcards.suite)
+
+
 def benchmark_settings(wildcards):
     """`benchmark` with the suite's override deep-merged over it, plus `sim` and `proxies` (phiscene.config)."""
     return phiscene.config.bench_settings(config, wildcards.suite)
@@ -182,7 +187,9 @@ def reconstructed_suite(suite):
         return False
     from phiscene.bench.build import with_suite_defaults
 
-    merged = with_suite_defaults(suite, phiscene.config.bench_settings(config, suite))
+    merged = with_suite_defaults(
+        phiscene.config.suite_generator(config, suite), phiscene.config.bench_settings(config, suite)
+    )
     return (merged.get("degrade") or {}).get("kind", "clean") == "foundation"
 
 
