@@ -344,8 +344,8 @@ def _flushed_on(plane, obj, proxy: Proxy | None, pose: np.ndarray, max_angle_deg
     hull = trimesh.convex.convex_hull(_shape_points(proxy, obj.mesh()))
     normals = resting.cached_resting_normals(hull.vertices, cache_dir)
     out, angle, shift = resting.flush_attached(pose, normals, np.asarray(hull.center_mass), hull.vertices,
-                                          np.asarray(plane.normal, dtype=float), plane.offset, plane.kind == "wall",
-                                          max_angle_deg)
+                                               np.asarray(plane.normal, dtype=float), plane.offset,
+                                               plane.kind == "wall", max_angle_deg)
     rec.update(flush_angle=rounded(angle), attach_shift=rounded(shift))
     return out
 
@@ -370,11 +370,11 @@ def _faithful_start(scene: Scene, oid: str, proxy: Proxy | None, graph, poses: d
         rec["carried_by"] = carrier
     if fp.ray and eye is not None and info["below"] and not info["leaning"]:
         pose, shift = starts.ray_corrected(pose, info["points"], info["com"], info["below_world"], scene.ground_height,
-                                       eye, fp)
+                                           eye, fp)
         rec["ray_shift"] = rounded(shift)
     if fp.flush and info["flushable"]:
         turned, info["flush_angle"] = resting.flush_pose(pose, info["normals"], info["com"], info["up"],
-                                                    fp.max_flush_angle)
+                                                         fp.max_flush_angle)
         info["flush_rotation"] = decompose(turned)[0] @ decompose(pose)[0].T  # world frame, about the centre of mass
         pose = turned
     rec["flush_angle"] = rounded(info["flush_angle"])
@@ -446,7 +446,7 @@ def _resolve_faithful(scene: Scene, oid: str, pose: np.ndarray, placed: list[Sdf
     near = {q: _placed_mesh(scene, q, poses, world_meshes) for q in rec["sdf_context"] if q in poses}
     bottom = np.vstack([info["points"], sample_surface(mesh, beneath.RESTING_SAMPLES, pp.seed)])
     holders = beneath.resting_on(transform_points(lifted, bottom), resting.com_world(lifted, info["com"]), near,
-                            scene.ground_height, pp.eps + fp.contact_tol)
+                                 scene.ground_height, pp.eps + fp.contact_tol)
     if not holders:
         return out
     rec["sdf_lifted"] = {"onto": holders, "planar_translation": [rounded(v) for v in out[:3, 3] - pose[:3, 3]]}
@@ -554,7 +554,7 @@ def _surfaces(scene: Scene, poses: dict[str, np.ndarray], names: list[str], seed
     for q in names:
         if q not in cache:
             cache[q] = starts.upward_samples(scene.get(q).mesh().copy().apply_transform(poses[q]), starts.ONTO_SAMPLES,
-                                         seed)
+                                             seed)
     parts = [cache[q] for q in names]
     return np.vstack(parts) if parts else np.zeros((0, 3))
 
@@ -619,7 +619,7 @@ def _joint_settle(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, cac
         if cert is not None:
             com = coms[oid]
             cert["displacement"] = rounded(float(np.linalg.norm(resting.com_world(poses[oid], com)
-                                                               - resting.com_world(inputs[oid], com))))
+                                                                - resting.com_world(inputs[oid], com))))
             cert["rotation_change"] = rounded(np.degrees(turned), 6)
             if entry["displacement"] > fp.joint_tol or np.degrees(entry["rotation_change"]) > fp.joint_tol_deg:
                 cert["remedy"] = f"{cert['remedy']}+joint"

@@ -29,7 +29,7 @@ def vertical_gap(points: np.ndarray, supporters: dict, ground_height: float, ban
 
 
 def gap_under(points: np.ndarray, supporters: dict, ground_height: float, band: float = 0.3, max_points: int = 256,
-           reach: float = 0.05, centre: np.ndarray | None = None) -> tuple[float | None, bool]:
+              reach: float = 0.05, centre: np.ndarray | None = None) -> tuple[float | None, bool]:
     """:func:`vertical_gap`, and whether a supporter's surface lies under ``centre`` (3,) (the ground is under
     everything; ``True`` when no centre is given)."""
     pts = np.asarray(points, dtype=float)

@@ -34,7 +34,7 @@ FALLBACK_TILTS = 4
 
 
 def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: SimSettings, sp: SettleParams,
-                     fp: FaithfulParams, info: dict, rec: dict, com: np.ndarray | None = None) -> np.ndarray:
+                    fp: FaithfulParams, info: dict, rec: dict, com: np.ndarray | None = None) -> np.ndarray:
     """Guarded settling (see :mod:`phiscene.assembly.faithful`); fills ``rec``; returns the frozen pose.
 
     Every start (the corrected pose, then that pose moved out of proxy overlaps (``clear``), then the nearest
@@ -187,7 +187,7 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
             went = [t["travel"] for t in tried if math.isfinite(t["travel"])]
             reach = max(fp.onto_reach, min(went)) if went else fp.onto_reach
             onto = starts.onto_start(here, info["com"], points, info["surfaces"](info["placed"]), reach,
-                                 fp.contact_tol / 2, info["walls"])
+                                     fp.contact_tol / 2, info["walls"])
             if onto is not None and onto[1] > 1e-3:
                 attempt(f"onto {onto[1]:.3f} m", onto[0], origin=onto[0])
         if fp.ballast and not any(t["ok"] for t in tried) and all(
@@ -223,7 +223,7 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
                 # flat where it stands, level, with its mass as low
                 declared = com if declared is None else declared
                 flat = ballast.flat_base(start, proxy.hulls, own if declared is None else declared, info["up"],
-                                    fp.tilt_test)
+                                         fp.tilt_test)
                 if flat is not None:
                     mass(declared, flat[0])
                     t = attempt(f"base {flat[1]:g}", start, origin=start)

@@ -153,14 +153,14 @@ def ray_corrected(pose: np.ndarray, points_local: np.ndarray, com_local: np.ndar
         Signed distance moved along the ray (m, > 0: away from the camera; 0 when not moved).
     """
     gap, held = gap_under(transform_points(pose, points_local), supporters, ground_height,
-                       centre=com_world(pose, com_local))
+                          centre=com_world(pose, com_local))
     if gap is None:
         return pose, 0.0
     moved, t = along_ray(pose, com_local, eye, gap, fp.ray_share, fp.ray_min_pitch, fp.ray_max_shift)
     if t == 0.0:
         return pose, 0.0
     after, held_after = gap_under(transform_points(moved, points_local), supporters, ground_height,
-                               centre=com_world(moved, com_local))
+                                  centre=com_world(moved, com_local))
     if after is None or abs(after - (gap + moved[2, 3] - pose[2, 3])) > surface_tol or (held and not held_after):
         return pose, 0.0
     return moved, t
