@@ -31,6 +31,7 @@ from phiscene.assembly.penetration import (
     min_translation_search,
     minimize_hinge,
     search_directions,
+    upward_clearance,
 )
 from phiscene.errors import InputError
 from phiscene.inertia import rigid_props
@@ -287,6 +288,29 @@ def test_plank_jammed_across_a_gap_turns_free(work):
     moved = plank.copy().apply_transform(pose)
     for body in (a, b):
         assert clearance(moved, block.copy().apply_transform(body.pose)) > EPS - 2e-3
+
+
+def test_upward_clearance_goes_straight_up_or_around_an_overhang_and_rests(work):
+    """A 10 cm cube sunk 3 cm into a slab: straight up clears it by the analytic 3 cm + eps. With an overhang 2 cm
+    above its top, reaching 3 cm past its centre, straight up would have to pass the overhang (22.5 cm); the cube
+    goes up and sideways past the overhang's edge instead (8 cm + eps in x) and is lowered back onto the slab,
+    resting on it by eps."""
+    slab_m, cube_m = trimesh.creation.box((0.6, 0.6, 0.06)), trimesh.creation.box((0.1, 0.1, 0.1))
+    over_m = trimesh.creation.box((0.3, 0.6, 0.1))
+    slab = _body("slab", slab_m, make_pose(translation=(0, 0, 0.03)), work["cache"])  # top at 0.06
+    over = _body("over", over_m, make_pose(translation=(-0.12, 0, 0.2)), work["cache"])  # x up to 0.03, z from 0.15
+    pose = make_pose(translation=(0, 0, 0.08))  # bottom 0.03 (3 cm into the slab), top 0.13
+    cube = _body("cube", cube_m, pose, work["cache"])
+    pp = PenetrationParams(search_directions=32)
+    up = upward_clearance(cube, [slab], 0.0, pp, reach=0.3)
+    assert up[0] == 0.0 and up[1] == 0.0 and up[2] == pytest.approx(0.03 + EPS, abs=1e-3)
+    around = upward_clearance(cube, [slab, over], 0.0, pp, reach=0.3)
+    assert around is not None and np.linalg.norm(around) < 0.2  # not over the overhang (22.5 cm straight up)
+    moved = cube_m.copy().apply_transform(make_pose(translation=pose[:3, 3] + around))
+    assert moved.bounds[0, 0] >= 0.03 + EPS - 2e-3  # past the overhang's edge
+    assert clearance(moved, slab_m.copy().apply_translation((0, 0, 0.03))) == pytest.approx(EPS, abs=2e-3)  # rests
+    assert clearance(moved, over_m.copy().apply_translation((-0.12, 0, 0.2))) > EPS - 2e-3
+    assert upward_clearance(cube, [slab, over], 0.0, pp, reach=0.02) is None
 
 
 def test_search_directions_are_unit_and_planar_ones_horizontal():

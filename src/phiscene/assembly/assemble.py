@@ -29,7 +29,7 @@ from phiscene.assembly.penetration import (
     SdfBody,
     resolve_penetration,
     sdf_body,
-    vertical_clearance,
+    upward_clearance,
 )
 from phiscene.assembly.record import LOG_FORMAT, rounded
 from phiscene.assembly.settle import (
@@ -425,7 +425,8 @@ def _resolve_faithful(scene: Scene, oid: str, pose: np.ndarray, placed: list[Sdf
                       poses: dict[str, np.ndarray], world_meshes: dict[str, object], pp: PenetrationParams,
                       fp: FaithfulParams, cache_dir: Path, rec: dict, info: dict) -> np.ndarray:
     """The faithful variant's SDF stage: :func:`_resolve`, horizontally only for an object on the floor alone
-    (:func:`_on_the_floor`), lifted straight up instead where that is much shorter, at most ``max_shift``, and
+    (:func:`_on_the_floor`), moved up and out instead where that is much shorter (:func:`upward_clearance`: straight
+    up or up and sideways, then lowered onto what lies there), at most ``max_shift``, and
     leaves it resting on placed objects (``FaithfulParams.floor_lift``: ``info["below"]`` becomes those objects,
     ``rec["sdf_lifted"]`` says so). ``poses`` are the placed objects' (id -> (4, 4)), ``world_meshes`` a cache
     of their world meshes."""
@@ -437,12 +438,12 @@ def _resolve_faithful(scene: Scene, oid: str, pose: np.ndarray, placed: list[Sdf
     if not planar or fp.floor_lift <= 0 or pushed <= fp.max_slide:
         return out
     active = sdf_body(oid, mesh, pose, pp.n_active, pp, cache_dir)
-    lift = vertical_clearance(active, placed, scene.ground_height, pp, scene.structure,
-                              min(fp.floor_lift * pushed, fp.max_shift, pp.search_reach))
+    lift = upward_clearance(active, placed, scene.ground_height, pp, scene.structure,
+                            min(fp.floor_lift * pushed, fp.max_shift, pp.search_reach))
     if lift is None:
         return out
     lifted = pose.copy()
-    lifted[2, 3] += lift
+    lifted[:3, 3] += lift
     near = {q: _placed_mesh(scene, q, poses, world_meshes) for q in rec["sdf_context"] if q in poses}
     bottom = np.vstack([info["points"], sample_surface(mesh, beneath.RESTING_SAMPLES, pp.seed)])
     holders = beneath.resting_on(transform_points(lifted, bottom), resting.com_world(lifted, info["com"]), near,
@@ -450,7 +451,7 @@ def _resolve_faithful(scene: Scene, oid: str, pose: np.ndarray, placed: list[Sdf
     if not holders:
         return out
     rec["sdf_lifted"] = {"onto": holders, "planar_translation": [rounded(v) for v in out[:3, 3] - pose[:3, 3]]}
-    rec.update(sdf_planar=False, sdf_final_loss=0.0, sdf_translation=[0.0, 0.0, rounded(lift)],
+    rec.update(sdf_planar=False, sdf_final_loss=0.0, sdf_translation=[rounded(v) for v in lift],
                sdf_rotation=[0.0, 0.0, 0.0])
     info["below"] = holders
     info["below_world"] = {q: near[q] for q in holders}

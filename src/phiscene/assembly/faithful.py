@@ -127,8 +127,9 @@ class FaithfulParams(Params):
         (a box a depth error sank into the box it is stacked on, read as standing on the floor) and the push
         is free.
     floor_lift
-        Such an object pushed horizontally farther than ``max_slide``, or not clear at all, is lifted straight up
-        out of the overlap instead (:func:`~phiscene.assembly.penetration.vertical_clearance`; its input, on the
+        Such an object pushed horizontally farther than ``max_slide``, or not clear at all, is moved up and out
+        of the overlap instead (:func:`~phiscene.assembly.penetration.upward_clearance`: straight up, or up and
+        sideways, then lowered onto what lies there; its input, on the
         floor, inside a piece of furniture: a book a depth error sank into a shelf's bottom board, read as
         standing on the floor, slid out of the shelf across the floor) when that lift is at most this share of
         the horizontal push and at most ``max_shift`` (an office chair tucked under a conference table, wedged in

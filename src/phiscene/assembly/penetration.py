@@ -593,15 +593,56 @@ def min_translation_search(loss_fn: Callable, base: np.ndarray, directions: np.n
     return None
 
 
-def vertical_clearance(active: SdfBody, context: list[SdfBody], ground_height: float | None,
-                       params: PenetrationParams, planes=(), reach: float = 0.6) -> float | None:
-    """The smallest lift (m, straight up, to ``params.search_step`` then bisected) that clears ``active`` of
-    ``context``, the ground and ``planes`` by ``params.eps`` (the loss of :func:`resolve_penetration` exactly
-    zero); ``None`` when none within ``reach`` does (:func:`min_translation_search` along +z)."""
+#: :func:`upward_clearance`: the least upward component of the directions it tries besides straight up (sin 15 deg).
+UPWARD_MIN_Z = 0.26
+
+
+def upward_clearance(active: SdfBody, context: list[SdfBody], ground_height: float | None,
+                     params: PenetrationParams, planes=(), reach: float = 0.6) -> np.ndarray | None:
+    """The shortest move up and out of an overlap, then straight down to where the object rests: (3,) m or ``None``.
+
+    Straight up first, then the upward ones of ``2 params.search_directions`` directions over the sphere (at
+    least :data:`UPWARD_MIN_Z` up), are marched out together (:func:`min_translation_search`, to within
+    ``search_step``, bisected, at most ``reach``); from the first clear point the object is lowered straight down
+    while the loss stays exactly zero (to ``search_step``, then bisected), so it ends on whatever lies under it
+    there, clear by ``params.eps``: a can a depth error put behind a shelf's bottom board and into the wall comes
+    forward and up onto the board, not 40 cm sideways along the floor. ``None`` when no direction clears within
+    ``reach``.
+    """
     loss_fn = _Loss(active, context, ground_height, params.eps, params.ground_extreme_points, planes)
-    found = min_translation_search(loss_fn, np.zeros(3), np.array([[0.0, 0.0, 1.0]]), params.search_step, reach,
-                                   params.backtrack_steps)
-    return None if found is None else float(found[2])
+    sphere = search_directions(2 * max(params.search_directions, 1))
+    up = np.vstack([[0.0, 0.0, 1.0], sphere[sphere[:, 2] >= UPWARD_MIN_Z]])
+    found = min_translation_search(loss_fn, np.zeros(3), up, params.search_step, reach, params.backtrack_steps)
+    if found is None:
+        return None
+    drop = max_clear_drop(loss_fn, found, params.search_step, max(float(found[2]), 0.0), params.backtrack_steps)
+    return found - np.array([0.0, 0.0, drop])
+
+
+def max_clear_drop(loss_fn: Callable, start: np.ndarray, step: float, reach: float, bisect_steps: int) -> float:
+    """How far (m) a clear translation ``start`` (3,) can be lowered straight down with ``loss_fn`` still exactly
+    zero: marched in steps of ``step`` up to ``reach``, then bisected between the last clear and the first
+    overlapping height."""
+    import torch
+
+    def clear(t: float) -> bool:
+        with torch.no_grad():
+            return float(loss_fn(torch.as_tensor(start - np.array([0.0, 0.0, t]), dtype=torch.float64))) == 0.0
+
+    lo, t = 0.0, 0.0
+    while t < reach:
+        t = min(t + step, reach)
+        if not clear(t):
+            hi = t
+            for _ in range(bisect_steps):
+                mid = 0.5 * (lo + hi)
+                if clear(mid):
+                    lo = mid
+                else:
+                    hi = mid
+            return lo
+        lo = t
+    return lo
 
 
 def minimize_hinge(loss_fn: Callable, shape: tuple[int, ...], lr: float, max_iterations: int,
