@@ -605,9 +605,9 @@ def upward_clearance(active: SdfBody, context: list[SdfBody], ground_height: flo
     least :data:`UPWARD_MIN_Z` up), are marched out together (:func:`min_translation_search`, to within
     ``search_step``, bisected, at most ``reach``); from the first clear point the object is lowered straight down
     while the loss stays exactly zero (to ``search_step``, then bisected), so it ends on whatever lies under it
-    there, clear by ``params.eps``: a can a depth error put behind a shelf's bottom board and into the wall comes
-    forward and up onto the board, not 40 cm sideways along the floor. ``None`` when no direction clears within
-    ``reach``.
+    there, clear by ``params.eps``: a box standing in a crate, read as on the floor (the input had the crate
+    floating), overlaps the crate once the crate is lowered; it goes 3 cm up and sideways to rest on the crate's
+    floor instead of 15 cm sideways along the floor. ``None`` when no direction clears within ``reach``.
     """
     loss_fn = _Loss(active, context, ground_height, params.eps, params.ground_extreme_points, planes)
     sphere = search_directions(2 * max(params.search_directions, 1))
