@@ -151,18 +151,17 @@ def cmd_metrics(args: argparse.Namespace) -> None:
 
 
 def cmd_bench(args: argparse.Namespace) -> None:
-    from phiscene.bench.build import build_scene
-    from phiscene.config import suite_generator
+    from phiscene.bench.build import TEMPLATES, build_scene
+    from phiscene.config import ConfigError, suite_generator
 
     cfg = _config(args.config)
     params = _bench_settings(cfg, args.suite)
     cache = Path(args.cache_dir or cfg.get("cache_dir", Path(args.out_dir) / "cache"))
-    from phiscene.bench.templates import TEMPLATES
-
-    generator = suite_generator(cfg, args.suite)
-    if generator not in TEMPLATES or "source" in cfg["suites"][args.suite]:
+    try:
+        generator = suite_generator(cfg, args.suite)
+    except ConfigError:
         raise PhisceneError(f"--suite {args.suite!r}: not built by an embedded benchmark generator (known: "
-                            f"{', '.join(sorted(TEMPLATES))}; a suite of another name gives `generator:`)")
+                            f"{', '.join(sorted(TEMPLATES))}; a suite of another name gives `generator:`)") from None
     build_scene(Path(args.out_dir), generator, args.index, params, cache)
     print(f"wrote {args.out_dir}")
 

@@ -150,8 +150,25 @@ def suite_generator(config: Mapping[str, Any], suite: str) -> str:
     ``suites.<suite>.generator``, else the suite's own name. A suite of another name built by one of them (a
     held-out seed or another degradation, beside the default suites in the same ``results/``) names it; the same
     generator, seed and scene index give the same ground truth whatever the suite is called.
+
+    Raises
+    ------
+    ConfigError
+        No embedded generator builds the suite: it reads real data (``source``), or no generator has that name.
     """
-    return str(config["suites"][suite].get("generator", suite))
+    from phiscene.bench.build import TEMPLATES  # importing build registers every generator
+
+    spec = config["suites"][suite]
+    if "source" in spec:
+        raise ConfigError(f"config: suites.{suite}: read from real data (`source`), not built by an embedded "
+                          "benchmark generator")
+    generator = str(spec.get("generator", suite))
+    if generator not in TEMPLATES:
+        hint = "" if "generator" in spec else ("; a suite of another name says which builds it "
+                                               "(`generator: <one of them>`)")
+        raise ConfigError(f"config: suites.{suite}: no embedded benchmark generator {generator!r} (known: "
+                          f"{', '.join(sorted(TEMPLATES))}){hint}, or give a real-data `source`")
+    return generator
 
 
 def bench_settings(config: Mapping[str, Any], suite: str) -> dict:
@@ -271,7 +288,6 @@ def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -
             check_params(load_class(spec), value, path)
 
     from phiscene.bench.build import BenchParams, with_suite_defaults
-    from phiscene.bench.templates import TEMPLATES
 
     for suite, spec in _mapping(config.get("suites"), "suites").items():
         spec = _mapping(spec, f"suites.{suite}")
@@ -290,11 +306,6 @@ def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -
             check_params(load_class(SOURCE_PARAMS[kind]), source, f"suites.{suite}.source")
         else:
             generator = suite_generator(config, suite)
-            if generator not in TEMPLATES:
-                hint = "" if "generator" in spec else ("; a suite of another name says which builds it "
-                                                       "(`generator: <one of them>`)")
-                raise ConfigError(f"config: suites.{suite}: no embedded benchmark generator {generator!r} (known: "
-                                  f"{', '.join(sorted(TEMPLATES))}){hint}, or give a real-data `source`")
             check_params(BenchParams, spec.get("benchmark"), f"suites.{suite}.benchmark")
             merged = with_suite_defaults(generator, bench_settings(config, suite))
             check_params(BenchParams, merged, f"suites.{suite}.benchmark")
