@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from phiscene.assembly import beneath, certify, guarded, resting, starts
+from phiscene.assembly import beneath, certify, fixtures, guarded, resting, starts
 from phiscene.assembly.faithful import BELOW, FaithfulParams
 from phiscene.assembly.penetration import (
     PenetrationParams,
@@ -203,8 +203,12 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
 
             if oid in attached:
                 if params.faithful.enabled and params.faithful.flush:
-                    pose = _flush_attached(scene, oid, obj, proxies.get(oid), attached[oid],
-                                           params.faithful.max_flush_angle, cache_dir, rec)
+                    pose = fixtures.flush_fixture(scene, oid, obj, proxies.get(oid), attached[oid],
+                                                  params.faithful.max_flush_angle, cache_dir, rec)
+                if params.faithful.enabled and params.faithful.fixtures and params.penetration:
+                    pose = fixtures.clear_fixture(scene, oid, pose, attached[oid],
+                                                  [b for b in placed if b.id in attached], pp,
+                                                  params.faithful.contact_tol, cache_dir, rec)
                 _fix(world if params.settle else None, oid, obj.mesh(), proxies.get(oid), pose, sim, rec,
                      masses.get(oid))
                 total, turned = window_motion(initial, pose)
@@ -308,46 +312,6 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     record = {"format": LOG_FORMAT, "order": order, "appended": appended, "params": params.to_dict(),
               "sim": sim.to_dict(), "objects": objects, "summary": summary}
     return _as_grounded(scene.with_poses(poses), attached, masses, bases), record
-
-
-def _flush_attached(scene: Scene, oid: str, obj, proxy: Proxy | None, holder: str, max_angle_deg: float,
-                    cache_dir: Path, rec: dict) -> np.ndarray:
-    """The pose (4, 4) of an attached object made flush with the wall or ceiling holding it
-    (:func:`~phiscene.assembly.resting.flush_attached`; its input pose when the holder is not a plane of
-    ``scene.structure``, the ground standing for an unknown wall, or is an estimated one, which is where the
-    objects it comes from are), then lifted out of the floor when its mesh
-    reaches at most ``ATTACH_REACH`` below it (a floor-length curtain a depth error pushed through the floor;
-    lifting it slides it along its wall). Fills ``rec`` (``flush_angle`` deg, ``attach_shift`` m,
-    ``attach_lift`` m)."""
-    pose = np.asarray(obj.pose, dtype=float)
-    plane = next((q for q in scene.structure if q.id == holder and not q.estimated), None)
-    out = pose if plane is None else _flushed_on(plane, obj, proxy, pose, max_angle_deg, cache_dir, rec)
-    below = scene.ground_height - float(transform_points(out, np.asarray(obj.mesh().vertices))[:, 2].min())
-    lift = below if 0.0 < below <= resting.ATTACH_REACH else 0.0
-    if lift:
-        out = out.copy()
-        out[2, 3] += lift
-    rec["attach_lift"] = rounded(lift)
-    return out
-
-
-def _shape_points(proxy: Proxy | None, mesh) -> np.ndarray:
-    """The vertices (n, 3), local, of an object's collision shape: its convex pieces', else its mesh's."""
-    return np.vstack(proxy.hulls) if proxy is not None and proxy.hulls else np.asarray(mesh.vertices)
-
-
-def _flushed_on(plane, obj, proxy: Proxy | None, pose: np.ndarray, max_angle_deg: float, cache_dir: Path,
-                rec: dict) -> np.ndarray:
-    """``pose`` made flush with ``plane`` (:func:`~phiscene.assembly.resting.flush_attached`); fills ``rec``."""
-    import trimesh
-
-    hull = trimesh.convex.convex_hull(_shape_points(proxy, obj.mesh()))
-    normals = resting.cached_resting_normals(hull.vertices, cache_dir)
-    out, angle, shift = resting.flush_attached(pose, normals, np.asarray(hull.center_mass), hull.vertices,
-                                               np.asarray(plane.normal, dtype=float), plane.offset,
-                                               plane.kind == "wall", max_angle_deg)
-    rec.update(flush_angle=rounded(angle), attach_shift=rounded(shift))
-    return out
 
 
 def _faithful_start(scene: Scene, oid: str, proxy: Proxy | None, graph, poses: dict[str, np.ndarray],
@@ -526,7 +490,7 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
     below = [e.source for e in edges if e.relation in BELOW] or (["ground"] if not edges else [])
     mesh = obj.mesh()
     _, _, scale = decompose(obj.pose)
-    points = _shape_points(proxy, mesh)
+    points = fixtures.shape_points(proxy, mesh)
     hull = trimesh.convex.convex_hull(points)
     com = np.asarray(hull.center_mass, dtype=float)
     parents_world = {}

@@ -182,6 +182,10 @@ class FaithfulParams(Params):
         it, is knocked over by the simulator's separation before gravity acts. A start that overlaps and is
         accepted all the same is kept (a chair whose pieces reach into the table it stands at is nudged, not
         moved out). The move is recorded (``proxy_clear``).
+    fixtures
+        An attached object that overlaps one attached before it deeper than ``contact_tol`` (a curtain through
+        the window behind it, two posters through each other) is moved the shortest way clear of it, never into
+        the wall or ceiling holding it (:mod:`phiscene.assembly.fixtures`). Recorded as ``fixture_clear``.
     lean
         Remedy ``lean``: when the corrected pose of an object that leans (a ``leans_on`` parent) is rejected, move it,
         lowered onto what lies beneath, horizontally until it touches each object or wall it leans on
@@ -290,6 +294,7 @@ class FaithfulParams(Params):
     retry_damping: float = 0.9
     retry_rolling_friction: float = 0.1
     clear: bool = True
+    fixtures: bool = True
     lean: bool = True
     max_shift: float = 0.09
     shift_directions: int = 6

@@ -619,6 +619,55 @@ def upward_clearance(active: SdfBody, context: list[SdfBody], ground_height: flo
     return found - np.array([0.0, 0.0, drop])
 
 
+def overlaps_deeper(active: SdfBody, context: list[SdfBody], tol: float, extreme_points: bool = True) -> bool:
+    """Whether a surface sample of ``active`` lies deeper than ``tol`` (m) inside one of ``context``, or one of
+    theirs inside it (the clearance hinge of :class:`_Loss` at ``eps = -tol``, at the current poses)."""
+    import torch
+
+    with torch.no_grad():
+        return float(_Loss(active, context, None, -tol, extreme_points)(torch.zeros(3, dtype=torch.float64))) > 0.0
+
+
+def fixture_clearance(active: SdfBody, context: list[SdfBody], ground_height: float | None,
+                      params: PenetrationParams, outward: np.ndarray | None = None) -> np.ndarray | None:
+    """The shortest translation (3,) m that takes a fixed object clear of other fixed ones, never against
+    ``outward``.
+
+    Objects fixed to a wall or the ceiling are kept where the input put them, and inputs put them through each
+    other: a curtain through the window it hangs in front of, two posters through each other. The move is the
+    smallest clearing one (by ``params.eps``; :func:`min_translation_search` over ``outward`` first, then the
+    ``2 params.search_directions`` directions over the sphere, to within ``search_step``, bisected, at most
+    ``search_reach``) among the directions with no component against ``outward`` (the holder's normal, into the
+    room): out in front of the other object, or sideways along the wall. The ground term keeps it out of the floor
+    (a floor-length curtain moved down through it is no nearer to the photo).
+
+    Parameters
+    ----------
+    active
+        The fixed object to move.
+    context
+        The fixed objects placed before it.
+    ground_height
+        Height of the ground plane, or ``None`` for no ground.
+    params
+        Search settings (``eps``, ``search_directions``, ``search_step``, ``search_reach``, ``backtrack_steps``).
+    outward : (3,) float, optional
+        Unit direction the object may not move against (``None``: any direction).
+
+    Returns
+    -------
+    (3,) float translation (zero when already clear by ``eps``), or ``None`` when no direction clears within
+    ``search_reach``.
+    """
+    directions = search_directions(2 * max(params.search_directions, 1))
+    if outward is not None:
+        out = np.asarray(outward, dtype=float) / np.linalg.norm(outward)
+        directions = np.vstack([out, directions[directions @ out >= 0.0]])
+    loss_fn = _Loss(active, context, ground_height, params.eps, params.ground_extreme_points)
+    return min_translation_search(loss_fn, np.zeros(3), directions, params.search_step, params.search_reach,
+                                  params.backtrack_steps)
+
+
 def max_clear_drop(loss_fn: Callable, start: np.ndarray, step: float, reach: float, bisect_steps: int) -> float:
     """How far (m) a clear translation ``start`` (3,) can be lowered straight down with ``loss_fn`` still exactly
     zero: marched in steps of ``step`` up to ``reach``, then bisected between the last clear and the first
