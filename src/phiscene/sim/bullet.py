@@ -18,7 +18,7 @@ import hashlib
 import logging
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -161,6 +161,10 @@ class _Body:
     inertial: np.ndarray  # (4, 4) COM frame in the scaled, unscaled-rotation link frame
     dynamic: bool
     props: RigidProps | None = None  # what makes it dynamic again after set_static
+    inverse: np.ndarray = field(init=False)  # (4, 4) inverse of inertial, read at every pose query
+
+    def __post_init__(self) -> None:
+        self.inverse = np.linalg.inv(self.inertial)
 
 
 class BulletWorld:
@@ -301,7 +305,7 @@ class BulletWorld:
         b = self.bodies[name]
         pos, quat = self.p.getBasePositionAndOrientation(b.uid)
         com_frame = make_pose(quat_xyzw_to_matrix(quat), pos)
-        link = com_frame @ np.linalg.inv(b.inertial)
+        link = com_frame @ b.inverse
         return make_pose(link[:3, :3], link[:3, 3], b.scale)
 
     def com_position(self, name: str) -> np.ndarray:
