@@ -182,14 +182,6 @@ class FaithfulParams(Params):
         it, is knocked over by the simulator's separation before gravity acts. A start that overlaps and is
         accepted all the same is kept (a chair whose pieces reach into the table it stands at is nudged, not
         moved out). The move is recorded (``proxy_clear``).
-    abandon
-        A start is given up as soon as settling has taken it to a gross failure (turned past ``max_stable_angle``
-        or moved past ``onto_reach`` from where it started, or lowered farther than that): it can no longer be
-        accepted, and it ranks behind every start that avoided one. Half the frames of the tried starts were spent
-        after that point (68 % on ``clutter``'s ``scene_002``, 49 % on ``custom_viga``). Where its end decides
-        (every start failed grossly, and the fallback ranks where they end; one within the slide bound when remedy
-        ``base`` asks whether any came to rest where it was put) an abandoned start is settled again to its end,
-        so the final pose is always the outcome of free settling. Off: every start runs to its end.
     fixtures
         An attached object that overlaps one attached before it deeper than ``contact_tol`` (a curtain through
         the window behind it, two posters through each other) is moved the shortest way clear of it, never into
@@ -302,7 +294,6 @@ class FaithfulParams(Params):
     retry_damping: float = 0.9
     retry_rolling_friction: float = 0.1
     clear: bool = True
-    abandon: bool = True
     fixtures: bool = True
     lean: bool = True
     max_shift: float = 0.09

@@ -75,37 +75,25 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
             world.add_body(oid, hulls, pose, rigid_props(mesh, hulls, sim.density, scale, declared))
             body.update(com=declared, base=base)
 
-    def attempt(label: str, start: np.ndarray, damped: bool = False, origin: np.ndarray | None = None,
-                patient: bool = False) -> dict:
-        # origin: where the slide bound is measured from (a shifted start: the start itself); patient: never
-        # abandoned (an abandoned start settled to its end, :func:`finished`)
-        args = {"label": label, "start": start, "damped": damped, "origin": origin}
+    def attempt(label: str, start: np.ndarray, damped: bool = False, origin: np.ndarray | None = None) -> dict:
+        # origin: where the slide bound is measured from (a shifted start: the start itself)
         origin = pose if origin is None else origin
         lowered = lowered_start(world, oid, start, context, fp.contact_tol / 2)
         # lowered farther than onto_reach: nothing it could stand on was beneath it (beside its shelf); a fall
         fell = float(start[2, 3] - lowered[2, 3])
         fell = fell if 0 < fp.onto_reach < fell else 0.0
         start = lowered
-
-        def gone(p: np.ndarray) -> bool:  # a gross failure already: it can no longer be accepted
-            _, m, t = certify.within_bounds(origin, p, info["com"], info["diag"], fp, start=lowered)
-            return certify.gross_failure(max(m, fell), t, fp)
-
-        abandon = gone if fp.abandon and not patient else None
         world.set_pose(oid, start)
         frames = 0
-        result = None
         if damped:
             world.set_dynamics(oid, linearDamping=fp.retry_damping, angularDamping=fp.retry_damping,
                                rollingFriction=fp.retry_rolling_friction, spinningFriction=fp.retry_rolling_friction)
-            first = settle_object(world, oid, sp, abandon)
+            first = settle_object(world, oid, sp)
             world.restore_dynamics(oid)
             frames += first.frames
             world.set_pose(oid, first.pose)  # at rest; then normal settings decide whether it stays
-            result = first if first.remedy == "abandoned" else None
-        if result is None:
-            result = settle_object(world, oid, sp, abandon)
-            frames += result.frames
+        result = settle_object(world, oid, sp)
+        frames += result.frames
         ok, moved, turned = certify.within_bounds(origin, result.pose, info["com"], info["diag"], fp, start=lowered)
         if fell:
             ok, moved = False, max(moved, fell)
@@ -136,25 +124,12 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
         out = {"label": label, "result": result, "frames": frames, "gross": gross, "turned": turned,
                "ok": stayed and result.settled and robust and not gave, "lost": bool(lost), "robust": robust,
                "loaded": not gave,
-               # travel: how far it went on its supporters; a start abandoned (still going) went farther than any
-               "stayed": stayed, "in_place": in_place, "moved": moved,
-               "travel": math.inf if lost or result.remedy == "abandoned" else moved,
+               "stayed": stayed, "in_place": in_place, "travel": moved if not lost else math.inf,
                "cost": certify.closeness(pose, result.pose, info["com"], info["diag"], start=lowered) + fell,
                "why": "; ".join(w for w in whys if w), "touching": near, "com": body["com"], "base": body["base"],
-               "tilt_tested": tested, "args": args}
+               "tilt_tested": tested}
         tried.append(out)
         return out
-
-    def finished(t: dict) -> dict:
-        # an abandoned start settled again, to its end, with the body it had; it takes the abandoned one's place
-        if t["result"].remedy != "abandoned":
-            return t
-        mass(t["com"], t["base"])
-        done = attempt(**t["args"], patient=True)
-        tried.pop()  # attempt appended it
-        done["frames"] += t["frames"]
-        tried[next(i for i, x in enumerate(tried) if x is t)] = done
-        return done
 
     def holds(t: dict) -> bool:
         # tilt-test a settled result where it came to rest, with the body it had (once): whether it holds
@@ -240,7 +215,7 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
                 if not t["ok"]:  # the flush is a correction, as for none
                     mass(com)  # the other starts as it came; the ballast result may still be the closest
             if fp.base and info["flushable"] and not info["given_base"] and not any(t["ok"] for t in tried) \
-                    and not _rests(tried, certify.slide_bound(info["diag"], fp), holds, finished):
+                    and not _rests(tried, certify.slide_bound(info["diag"], fp), holds):
                 mass(com)  # the body as it came (a tilt test may have changed it)
                 # nor with its mass low, and no start came to rest where it was put, however turned (a can
                 # tilted by a rotation error stands upright on its bottom, a resting pose 28 deg away): its
@@ -270,10 +245,6 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
                 if any(t["ok"] for t in done) or any(t["in_place"] and t["result"].settled for t in done):
                     break
     ok = [t for t in tried if t["ok"]]
-    if not ok and all(t["gross"] for t in tried):
-        # every start failed grossly: the fallback ranks where they end, so the abandoned ones are settled to it
-        for t in list(tried):
-            finished(t)
     if not ok and fp.tilt_test > 0 and not info["leaning"]:
         # the fallback: tilt-test the settled results in rank order (only those in place were tested), up to
         # the first that holds; one that only balances would roll off at the first disturbance
@@ -282,7 +253,7 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
                 continue
             if holds(t):
                 break
-    best = finished(ok[0] if ok else min(tried, key=certify.fallback_rank))  # (none is abandoned, as a rule)
+    best = ok[0] if ok else min(tried, key=certify.fallback_rank)
     share = info["visible"]() if not ok and info.get("visible") is not None else None
     if share is not None and share < fp.hidden_share:  # nan (outside the image): no
         # mostly unseen, and its guessed shape held by no start: kept where it was put, on what lies beneath it,
@@ -349,18 +320,10 @@ def _unflushed(world, oid: str, pose: np.ndarray, info: dict, below: list[str], 
     return out
 
 
-def _rests(tried: list[dict], bound: float, holds: Callable[[dict], bool], finished: Callable[[dict], dict]) -> bool:
+def _rests(tried: list[dict], bound: float, holds: Callable[[dict], bool]) -> bool:
     """Whether a start of ``tried`` (the attempts of :func:`settle_faithful`) came to rest where it was put, however
-    turned: settled, its centre of mass within ``bound`` (m) of its start, and ``holds`` (tilt-tested) it. A start
-    abandoned within ``bound`` (turned past the gross bound where it was put) is ``finished`` (settled to its end)
-    first."""
-    for t in list(tried):
-        if (t["moved"] if t["result"].remedy == "abandoned" else t["travel"]) > bound:
-            continue
-        t = finished(t)
-        if t["result"].settled and t["travel"] <= bound and holds(t):
-            return True
-    return False
+    turned: settled, its centre of mass within ``bound`` (m) of its start, and ``holds`` (tilt-tested) it."""
+    return any(t["result"].settled and t["travel"] <= bound and holds(t) for t in tried)
 
 
 def _stoppers(world, below: list[str]) -> list[str]:

@@ -24,11 +24,6 @@ Whatever the outcome, the result says which stage ended it (``remedy``) and
 the motion over the last window (``residual_translation`` in m,
 ``residual_rotation`` in rad); ``settled`` is false when no stage met the
 criterion.
-
-A caller that will reject a run once its pose has gone too far may pass
-``abandon``: a test of each frame's pose that ends the run there (remedy
-``abandoned``, not settled, the pose where it was given up), instead of
-simulating the rest of a fall that cannot be accepted.
 """
 
 from __future__ import annotations
@@ -100,8 +95,8 @@ class SettleResult:
     settled
         Whether the window criterion was met (see the module docstring).
     remedy
-        Stage that ended the run: ``none`` (within ``max_frames``), ``extra_frames``, ``damping``, ``failed``,
-        or ``abandoned`` (the caller's ``abandon`` test held).
+        Stage that ended the run: ``none`` (within ``max_frames``), ``extra_frames``, ``damping``, or
+        ``failed``.
     residual_translation, residual_rotation
         Motion over the last window (m, rad); ``inf`` if fewer than ``w`` frames ran (``None`` in
         :meth:`to_dict`).
@@ -137,16 +132,11 @@ def moved_past(a: np.ndarray, b: np.ndarray, tol_pos: float, tol_rot_deg: float)
     return moved > tol_pos or np.degrees(turned) > tol_rot_deg
 
 
-class _Abandoned(Exception):
-    """The ``abandon`` test of :func:`settle_object` held: the run ends here."""
-
-
 class _Window:
     """The last ``w + 1`` poses of one body and the window criterion on them."""
 
-    def __init__(self, world: BulletWorld, name: str, params: SettleParams,
-                 abandon: Callable[[np.ndarray], bool] | None = None):
-        self.world, self.name, self.params, self.abandon = world, name, params, abandon
+    def __init__(self, world: BulletWorld, name: str, params: SettleParams):
+        self.world, self.name, self.params = world, name, params
         self.poses: deque = deque([world.pose(name)], maxlen=params.window + 1)
         self.frames = 0
 
@@ -159,8 +149,6 @@ class _Window:
         """Record the pose after a frame the world advanced; return whether the criterion holds now."""
         self.frames += 1
         self.poses.append(self.world.pose(self.name))
-        if self.abandon is not None and self.abandon(self.poses[-1]):
-            raise _Abandoned
         return self.met()
 
     def motion(self) -> tuple[float, float]:
@@ -183,8 +171,7 @@ def _set_damping(world: BulletWorld, name: str, linear: float, angular: float) -
     world.set_dynamics(name, linearDamping=linear, angularDamping=angular)
 
 
-def settle_object(world: BulletWorld, name: str, params: SettleParams,
-                  abandon: Callable[[np.ndarray], bool] | None = None) -> SettleResult:
+def settle_object(world: BulletWorld, name: str, params: SettleParams) -> SettleResult:
     """Simulate the dynamic body ``name`` until the window criterion holds (or every remedy is spent).
 
     Parameters
@@ -195,23 +182,12 @@ def settle_object(world: BulletWorld, name: str, params: SettleParams,
         Body to settle.
     params
         Criterion, cap and remedy settings.
-    abandon
-        ``abandon(pose) -> bool``, tested on the pose (4, 4) after every frame: true ends the run there
-        (remedy ``abandoned``, not settled).
 
     Returns
     -------
     SettleResult
     """
-    win = _Window(world, name, params, abandon)
-    try:
-        return _settle(world, name, params, win)
-    except _Abandoned:
-        return _result(world, name, win, False, "abandoned")
-
-
-def _settle(world: BulletWorld, name: str, params: SettleParams, win: _Window) -> SettleResult:
-    """The stages of :func:`settle_object` on its window ``win``."""
+    win = _Window(world, name, params)
 
     def run(frames: int) -> bool:
         for _ in range(frames):
