@@ -90,3 +90,16 @@ def test_grounding_takes_the_later_of_two_posters_clear_of_the_first(cache, fixt
     assert b[1, 3] == pytest.approx(0.2, abs=1e-9) and b[2, 3] == pytest.approx(1.5, abs=1e-9)
     assert rec["objects"]["b"]["fixture_clear"][0] == pytest.approx(b[0, 3] - 0.01, abs=1e-6)
     assert rec["objects"]["a"]["fixture_clear"] is None
+
+
+def test_no_clearing_move_within_reach_leaves_it_and_says_so(cache):
+    # 2 cm of thickness to clear, a search that reaches 1 cm: the pose stays as it came, the log says why
+    path = save_mesh(POSTER, cache / "poster.obj")
+    scene = box_scene({"poster": path}, {"a": ("poster", at(0.01, 0.0)), "b": ("poster", at(0.01, 0.2))})
+    scene.structure = [WALL]
+    params = AssemblyParams.from_dict({"faithful": {"enabled": True},
+                                       "penetration_params": {"optimizer": "steepest", "search_directions": 32,
+                                                              "search_reach": 0.01}})
+    out, rec = ground_scene(scene, ["a", "b"], convex_proxies(scene, cache), params, SimSettings(), cache,
+                            attached={"a": "wall_0", "b": "wall_0"})
+    assert np.allclose(out.get("b").pose, at(0.01, 0.2)) and rec["objects"]["b"]["fixture_clear"] == "none found"
