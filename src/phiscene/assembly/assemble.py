@@ -203,7 +203,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
 
             if oid in attached:
                 if params.faithful.enabled and params.faithful.flush:
-                    pose = fixtures.flush_fixture(scene, oid, obj, proxies.get(oid), attached[oid],
+                    pose = fixtures.flush_fixture(scene, obj, proxies.get(oid), attached[oid],
                                                   params.faithful.max_flush_angle, cache_dir, rec)
                 if params.faithful.enabled and params.faithful.fixtures and params.penetration:
                     pose = fixtures.clear_fixture(scene, oid, pose, attached[oid],

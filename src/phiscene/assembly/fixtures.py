@@ -42,8 +42,8 @@ def shape_points(proxy: Proxy | None, mesh) -> np.ndarray:
     return np.vstack(proxy.hulls) if proxy is not None and proxy.hulls else np.asarray(mesh.vertices)
 
 
-def flush_fixture(scene: Scene, oid: str, obj, proxy: Proxy | None, holder: str, max_angle_deg: float,
-                  cache_dir: Path, rec: dict) -> np.ndarray:
+def flush_fixture(scene: Scene, obj, proxy: Proxy | None, holder: str, max_angle_deg: float, cache_dir: Path,
+                  rec: dict) -> np.ndarray:
     """The pose (4, 4) of an attached object made flush with the wall or ceiling holding it
     (:func:`~phiscene.assembly.resting.flush_attached`; its input pose when the holder is not a plane of
     ``scene.structure``, the ground standing for an unknown wall, or is an estimated one, which is where the
