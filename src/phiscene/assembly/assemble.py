@@ -161,7 +161,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         ``settled``, ``settle_remedy``, ``residual_translation``, ``residual_rotation``,
         ``settle_translation``, ``settle_rotation``, ``displacement``, ``rotation_change``, ``seconds`` per
         stage) and a ``summary``; with ``params.faithful.enabled`` also ``flush_angle`` (and ``ray_shift``, m,
-        with ``ray`` and ``eye``) and a
+        with ``ray`` and ``eye``; an attached object's ``attach_lift`` and, with ``fixtures``, ``fixture_clear``,
+        :func:`~phiscene.assembly.fixtures.clear_fixture`) and a
         ``certificate`` per object (:func:`~phiscene.assembly.certify.certificate`), and the summary lists the
         lost supporters, the remedies, the objects not stable in the final release (``joint_unstable``) and
         those that end a gross failure from their input (``gross``: id -> what happened,
