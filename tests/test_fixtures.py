@@ -13,6 +13,7 @@ import trimesh
 from scenes import box_scene, convex_proxies
 
 from phiscene.assembly import AssemblyParams, ground_scene
+from phiscene.assembly.fixtures import summary
 from phiscene.assembly.penetration import PenetrationParams, fixture_clearance, overlaps_deeper, sdf_body
 from phiscene.meshes import save_mesh
 from phiscene.scene import Plane
@@ -90,6 +91,11 @@ def test_grounding_takes_the_later_of_two_posters_clear_of_the_first(cache, fixt
     assert b[1, 3] == pytest.approx(0.2, abs=1e-9) and b[2, 3] == pytest.approx(1.5, abs=1e-9)
     assert rec["objects"]["b"]["fixture_clear"][0] == pytest.approx(b[0, 3] - 0.01, abs=1e-6)
     assert rec["objects"]["a"]["fixture_clear"] is None
+    # the progress line says what moved it
+    moved = float(np.linalg.norm(b[:3, 3] - at(0.01, 0.2)[:3, 3]))
+    assert summary(rec["objects"]["b"], moved, 0.0) == (f"moved {moved:.3f} m, turned 0.0 deg (clear of the fixed "
+                                                        "objects before it)")
+    assert summary(rec["objects"]["a"], 0.0, 0.0) == "kept in place"
 
 
 def test_no_clearing_move_within_reach_leaves_it_and_says_so(cache):

@@ -219,7 +219,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                     placed.append(sdf_body(oid, obj.mesh(), pose, pp.n_context, pp, cache_dir))
                 objects[oid] = rec
                 if progress is not None:
-                    progress(f"[{index + 1}/{len(order)}] {oid}: attached to {attached[oid]}, kept in place")
+                    progress(f"[{index + 1}/{len(order)}] {oid}: attached to {attached[oid]}, "
+                             f"{fixtures.summary(rec, total, turned)}")
                 continue
 
             fp = params.faithful

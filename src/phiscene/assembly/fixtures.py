@@ -110,3 +110,14 @@ def clear_fixture(scene: Scene, oid: str, pose: np.ndarray, holder: str, fixed: 
     out[:3, 3] += move
     rec["fixture_clear"] = [rounded(v) for v in move]
     return out
+
+
+def summary(rec: dict, moved: float, turned: float) -> str:
+    """The progress line's account of an attached object: ``kept in place``, or how far (``moved`` m, ``turned``
+    rad) and why, from its record ``rec`` (``flush_angle``, ``attach_lift``, ``fixture_clear``)."""
+    steps = (("made flush", rec.get("flush_angle")), ("lifted out of the floor", rec.get("attach_lift")),
+             ("clear of the fixed objects before it", isinstance(rec.get("fixture_clear"), list)))
+    why = [w for w, done in steps if done]
+    if not why:
+        return "kept in place"
+    return f"moved {moved:.3f} m, turned {np.degrees(turned):.1f} deg ({', '.join(why)})"
