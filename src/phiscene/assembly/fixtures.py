@@ -52,8 +52,9 @@ def flush_fixture(scene: Scene, obj, proxy: Proxy | None, holder: str, max_angle
     lifting it slides it along its wall). Fills ``rec`` (``flush_angle`` deg, ``attach_shift`` m,
     ``attach_lift`` m)."""
     pose = np.asarray(obj.pose, dtype=float)
-    plane = next((q for q in scene.structure if q.id == holder and not q.estimated), None)
-    out = pose if plane is None else _flushed_on(plane, obj, proxy, pose, max_angle_deg, cache_dir, rec)
+    plane = holder_plane(scene, holder)
+    out = pose if plane is None or plane.estimated else _flushed_on(plane, obj, proxy, pose, max_angle_deg,
+                                                                    cache_dir, rec)
     below = scene.ground_height - float(transform_points(out, np.asarray(obj.mesh().vertices))[:, 2].min())
     lift = below if 0.0 < below <= resting.ATTACH_REACH else 0.0
     if lift:
@@ -77,10 +78,16 @@ def _flushed_on(plane, obj, proxy: Proxy | None, pose: np.ndarray, max_angle_deg
     return out
 
 
+def holder_plane(scene: Scene, holder: str):
+    """The wall or ceiling of ``scene.structure`` called ``holder`` (:class:`~phiscene.scene.Plane`); ``None`` for
+    any other holder (the ground standing for an unknown wall)."""
+    return next((q for q in scene.structure if q.id == holder), None)
+
+
 def outward(scene: Scene, holder: str) -> np.ndarray | None:
-    """The unit normal (3,), into the room, of the wall or ceiling of ``scene.structure`` called ``holder``; ``None``
-    for any other holder (the ground standing for an unknown wall)."""
-    plane = next((q for q in scene.structure if q.id == holder), None)
+    """The unit normal (3,), into the room, of the wall or ceiling ``holder`` (:func:`holder_plane`); ``None`` for
+    any other holder."""
+    plane = holder_plane(scene, holder)
     if plane is None:
         return None
     n = np.asarray(plane.normal, dtype=float)

@@ -544,6 +544,15 @@ def search_directions(n: int, planar: bool = False) -> np.ndarray:
     return np.stack([r * np.cos(a), r * np.sin(a), z], axis=1)
 
 
+def directions_toward(axis, min_dot: float, n: int) -> np.ndarray:
+    """``axis`` (3,) made unit, then those of the ``n`` :func:`search_directions` over the sphere whose component
+    along it is at least ``min_dot``: (k, 3), the axis first (the searches that may only go one way: up, out from a
+    wall)."""
+    a = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    d = search_directions(n)
+    return np.vstack([a, d[d @ a >= min_dot]])
+
+
 def min_translation_search(loss_fn: Callable, base: np.ndarray, directions: np.ndarray, step: float, reach: float,
                            bisect_steps: int) -> np.ndarray | None:
     """The smallest translation ``base + t d`` (over the unit ``directions`` (k, 3), ``t`` in steps of ``step`` up
@@ -610,8 +619,7 @@ def upward_clearance(active: SdfBody, context: list[SdfBody], ground_height: flo
     floor instead of 15 cm sideways along the floor. ``None`` when no direction clears within ``reach``.
     """
     loss_fn = _Loss(active, context, ground_height, params.eps, params.ground_extreme_points, planes)
-    sphere = search_directions(2 * max(params.search_directions, 1))
-    up = np.vstack([[0.0, 0.0, 1.0], sphere[sphere[:, 2] >= UPWARD_MIN_Z]])
+    up = directions_toward((0.0, 0.0, 1.0), UPWARD_MIN_Z, 2 * max(params.search_directions, 1))
     found = min_translation_search(loss_fn, np.zeros(3), up, params.search_step, reach, params.backtrack_steps)
     if found is None:
         return None
@@ -659,10 +667,8 @@ def fixture_clearance(active: SdfBody, context: list[SdfBody], ground_height: fl
     (3,) float translation (zero when already clear by ``eps``), or ``None`` when no direction clears within
     ``search_reach``.
     """
-    directions = search_directions(2 * max(params.search_directions, 1))
-    if outward is not None:
-        out = np.asarray(outward, dtype=float) / np.linalg.norm(outward)
-        directions = np.vstack([out, directions[directions @ out >= 0.0]])
+    n = 2 * max(params.search_directions, 1)
+    directions = search_directions(n) if outward is None else directions_toward(outward, 0.0, n)
     loss_fn = _Loss(active, context, ground_height, params.eps, params.ground_extreme_points)
     return min_translation_search(loss_fn, np.zeros(3), directions, params.search_step, params.search_reach,
                                   params.backtrack_steps)
