@@ -536,6 +536,62 @@ def test_a_stack_that_tips_at_its_base_is_seen_two_levels_down(tmp_path, depth, 
         assert gives_way(world, "L", carriers, 60, 0.005, 1.0, SettleParams())[0] == moved
 
 
+@pytest.mark.parametrize("centre_load", [True, False])
+def test_a_load_that_tips_its_carrier_is_moved_over_the_carriers_centre(work, centre_load):
+    """Statics: a plank (0.5 x 0.05 x 0.02 m, mass m) lies on the table with its centre at x = 0.33, 7 cm inside
+    the table's edge (x = 0.4): alone it stays. A cube of 0.1 m (mass 2 m) is put on it at x = 0.47. On the frozen
+    plank the cube rests and holds when tilted, but the pair's centre of mass, (0.33 + 2 * 0.47) / 3 = 0.423, lies
+    beyond the edge: released together, the plank tips and the cube falls. Half of the way to the plank's centre
+    (x = 0.40) the pair's centre is (0.33 + 0.8) / 3 = 0.377, over the table: remedy ``centred`` stops there and
+    the scene holds when released. Without it the cube takes the fallback on the frozen plank, and the joint
+    release tips both."""
+    plank = make_pose(translation=(0.33, 0.0, 0.1 + 0.01 + 0.0005))
+    cube = make_pose(translation=(0.47, 0.0, 0.12 + 0.05 + 0.001))
+    scene = scene_of(work, {"table": ("table", TABLE), "plank": ("plank", plank), "cube": ("box", cube)})
+    g = graph_of(scene, [("ground", "table", "supports"), ("table", "plank", "supports"),
+                         ("plank", "cube", "supports")])
+    out, rec = run(work, scene, g, {"faithful": {"enabled": True, "centre_load": centre_load}})
+    cert = rec["objects"]["cube"]["certificate"]
+    x_cube, x_plank = out.get("cube").pose[0, 3], out.get("plank").pose[0, 3]
+    if centre_load:
+        assert cert["remedy"] == "centred" and cert["supporters_kept"] and cert["joint_stable"]
+        assert x_plank == pytest.approx(0.33, abs=0.005) and x_cube == pytest.approx((0.47 + x_plank) / 2, abs=0.01)
+        assert out.get("cube").pose[2, 3] == pytest.approx(0.17, abs=0.002)  # on the plank, not the table
+    else:
+        assert cert["remedy"].startswith("closest") and "gives way when released" in cert["reason"]
+        assert "+joint" in cert["remedy"] and abs(x_plank - 0.33) > 0.01  # the plank tipped under it
+
+
+def test_centred_starts_move_over_the_carriers_below_not_a_taller_neighbour(tmp_path):
+    """A cube (0.1 m) rests on a plank whose centre is 0.12 m to its -x, and touches a column (0.3 m tall) on its
+    +x side, whose centre of mass lies higher than the cube's: only the plank carries it. The starts move the
+    cube's centre of mass half and all of the way to the plank's (0.06 m, 0.12 m), the second capped at the reach
+    (0.09 m); both stay on the plank (no overlap, so not raised). Touching only the column: no start."""
+    from phiscene.assembly.guarded import _centred_starts
+    from phiscene.assembly.settle import SettleResult
+    from phiscene.inertia import rigid_props
+    from phiscene.sim.bullet import BulletWorld
+
+    shapes = {"plank": (0.5, 0.1, 0.02), "cube": (0.1, 0.1, 0.1), "column": (0.1, 0.1, 0.3)}
+    poses = {"plank": make_pose(translation=(0.0, 0, 0.01)), "cube": make_pose(translation=(0.12, 0, 0.0701)),
+             "column": make_pose(translation=(0.2202, 0, 0.15))}
+    with BulletWorld(SIM, tmp_path) as world:
+        world.add_ground(0.0)
+        for name, extents in shapes.items():
+            m = trimesh.creation.box(extents)
+            hulls = [np.asarray(m.vertices)]
+            world.add_body(name, hulls, poses[name], rigid_props(m, hulls, SIM.density, 1.0))
+            if name != "cube":
+                world.set_static(name)
+        rest = SettleResult(pose=poses["cube"], frames=0, settled=True, remedy="none", residual_translation=0.0,
+                            residual_rotation=0.0)
+        for touching, expected in ((["column", "plank"], [0.06, 0.03]), (["column"], [])):
+            starts = _centred_starts(world, "cube", {"result": rest, "touching": touching}, set(),
+                                     ["plank", "column"], 0.002, 0.09)
+            assert [round(float(s[0, 3]), 6) for s in starts] == expected
+            assert all(s[2, 3] == poses["cube"][2, 3] for s in starts)
+
+
 @pytest.mark.parametrize("optimizer", ["adam", "steepest"])
 def test_penetration_solve_pushes_along_the_normal_with_steepest(tmp_path, optimizer):
     """A cube sunk 2 cm into a tilted wall: the smallest translation clearing it is (2 cm + eps) along the normal."""

@@ -62,7 +62,12 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    (``ballast``, :func:`ballast.ballast_com`: the object is at rest in the photo, so its mass is not that of a uniform
    solid); then, when not even that start rests level and no start came to rest where it was put however
    turned, the same start on its base completed flat (``base``, :func:`ballast.flat_base`: its bottom, a hidden side
-   the reconstruction guessed round, cannot stand whatever its mass). When none is accepted, a result that is no
+   the reconstruction guessed round, cannot stand whatever its mass). When still none is accepted and a start came
+   to rest in place and holds when tilted but falls, or tips what carries it, when its carriers are released under
+   it (a body moves past the slide bound or turns past ``max_turn`` in that load test: a box on a book that
+   overhangs its own supporter), that rest moved horizontally half and then all of the way from its centre of mass
+   to its carriers' (``centre_load``, remedy ``centred``: the load over its carriers' centre adds no torque that
+   tips them). When none is accepted, a result that is no
    gross failure (turned past ``max_stable_angle`` or moved
    past ``onto_reach``: a table flipped over, a chair thrown across the room) is preferred, even one still moving
    when the settling window closed; among those, the settled result that stayed in place (on its supporters if
@@ -236,6 +241,16 @@ class FaithfulParams(Params):
         start. Kept when accepted like any start; the piece goes into the grounded scene
         (:attr:`phiscene.scene.SceneObject.base`), where every simulator, metric and export adds it to the
         object's proxies. The visible mesh is unchanged. Not for an object whose input already has a base.
+    centre_load
+        Remedy ``centred``: when no start is accepted and one came to rest in place and holds when tilted, but it
+        or its carriers move past the slide bound or turn past ``max_turn`` when they are released under it
+        (:func:`~phiscene.assembly.settle.gives_way`; a carrier that only rocks is left to joint settling), that
+        rest is tried again moved
+        horizontally ``CENTRE_FRACTIONS`` (:mod:`phiscene.assembly.guarded`) of the way from the object's centre
+        of mass to its carriers' (the free placed objects it touches there whose centre of mass lies lower than
+        its own, mass-weighted), at most ``max_shift``, nearest first.
+        Without it such an object takes the fallback at rest on carriers that tip once the scene is released
+        together: a tall stack then collapses in joint settling.
     ray
         With the photo's camera (:func:`~phiscene.assembly.assemble.ground_scene` ``eye``), close part of an
         object's vertical gap to what holds it (floating, or sunk in) by moving it along the camera ray through its
@@ -304,6 +319,7 @@ class FaithfulParams(Params):
     ballast: bool = True
     ballast_height: float = 0.25
     base: bool = True
+    centre_load: bool = True
     ray: bool = False
     ray_share: float = 0.5
     ray_max_shift: float = 0.15

@@ -32,6 +32,10 @@ from phiscene.transforms import decompose, transform_points, turned_about
 #: When no start is accepted, at most this many fallback results are tilt-tested, in rank order, for one that holds.
 FALLBACK_TILTS = 4
 
+#: Remedy ``centred``: shares of the way from a body's centre of mass to its carriers' that its starts move it,
+#: nearest first.
+CENTRE_FRACTIONS = (0.5, 1.0)
+
 
 def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: SimSettings, sp: SettleParams,
                     fp: FaithfulParams, info: dict, rec: dict, com: np.ndarray | None = None) -> np.ndarray:
@@ -40,7 +44,8 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
     Every start (the corrected pose, then that pose moved out of proxy overlaps (``clear``), then the nearest
     resting poses, then a damped run, then the pose moved onto the
     nearest supporting surface, then horizontal shifts when every start so far went farther than ``max_shift`` or
-    lost its supporters, or none came to rest level) is lowered onto what lies beneath and settled with the paper's
+    lost its supporters, or none came to rest level, then a rest whose carriers gave way under it moved over their
+    centre of mass (``centred``)) is lowered onto what lies beneath and settled with the paper's
     settling; the first result within the slide/drop/turn bounds that keeps the graph's supporters is taken, else,
     avoiding gross failures (turned past ``max_stable_angle`` or moved past ``onto_reach``) where a start did, the
     closest settled one that stayed in place (on its supporters if one did), else the closest. The final pose is
@@ -109,10 +114,12 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
                                               fp.joint_tol_deg, sp)
             frames += spent
         gave: list[str] = []  # the placed objects it touches (and their supporters), released under it, hold it
+        motions: dict[str, tuple[float, float]] = {}  # how far each body went in that test (m, deg)
         if result.settled and in_place and robust and fp.load_frames > 0:
             carriers = load_carriers(world, oid, near, info["fixed"], fp.contact_tol, fp.load_depth)
             if carriers:
-                gave, spent = gives_way(world, oid, carriers, fp.load_frames, fp.joint_tol, fp.joint_tol_deg, sp)
+                gave, spent = gives_way(world, oid, carriers, fp.load_frames, fp.joint_tol, fp.joint_tol_deg, sp,
+                                        motions)
                 frames += spent
         whys = ["" if ok else f"moved {moved:.3f} m / {turned:.1f} deg",
                 f"lost supporters {lost}" if lost else "", "" if result.settled else "not settled",
@@ -127,7 +134,9 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
                "stayed": stayed, "in_place": in_place, "travel": moved if not lost else math.inf,
                "cost": certify.closeness(pose, result.pose, info["com"], info["diag"], start=lowered) + fell,
                "why": "; ".join(w for w in whys if w), "touching": near, "com": body["com"], "base": body["base"],
-               "tilt_tested": tested}
+               "tilt_tested": tested,
+               "collapses": bool(gave) and any(m > certify.slide_bound(info["diag"], fp) or d > fp.max_turn
+                                               for m, d in motions.values())}
         tried.append(out)
         return out
 
@@ -244,6 +253,18 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
                 done = [attempt(f"shifted {r:.3f} m", s, origin=s) for s in ring]  # where one rests in place
                 if any(t["ok"] for t in done) or any(t["in_place"] and t["result"].settled for t in done):
                     break
+    if fp.centre_load and not any(t["ok"] for t in tried):
+        # at rest in place and holding when tilted, but it or what carries it falls when its carriers are released
+        # (a box on a book that overhangs its own supporter): the same rest with its centre of mass moved over its
+        # carriers'. Not for a carrier that only rocks under it (the joint release settles that)
+        tipping = [t for t in tried if not t["gross"] and t["result"].settled and t["in_place"] and t["robust"]
+                   and t["collapses"]]
+        if tipping:
+            t = min(tipping, key=lambda t: t["cost"])
+            mass(t["com"], t["base"])
+            for start in _centred_starts(world, oid, t, info["fixed"], context, fp.contact_tol / 2, fp.max_shift):
+                if attempt("centred", start, origin=start)["ok"]:
+                    break
     ok = [t for t in tried if t["ok"]]
     if not ok and fp.tilt_test > 0 and not info["leaning"]:
         # the fallback: tilt-test the settled results in rank order (only those in place were tested), up to
@@ -317,6 +338,44 @@ def _unflushed(world, oid: str, pose: np.ndarray, info: dict, below: list[str], 
     gaps = world.distances(oid, _stoppers(world, below), clearance)
     if gaps and min(gaps.values()) < 0:
         out[2, 3] += clearance / 2 - min(gaps.values())
+    return out
+
+
+def _centred_starts(world, oid: str, attempt: dict, fixed, context: list[str], clearance: float,
+                    reach: float) -> list[np.ndarray]:
+    """Starts of remedy ``centred`` (:class:`~phiscene.assembly.faithful.FaithfulParams` ``centre_load``).
+
+    The rest of ``attempt`` (an attempt of :func:`settle_faithful`: ``result.pose``, ``touching``) moved
+    horizontally by each of ``CENTRE_FRACTIONS`` of the way from the body's centre of mass to its carriers' (the
+    free placed bodies it touches there whose centre of mass lies lower than its own, mass-weighted: a chair
+    pushed against a table's edge is not carried by it), at most ``reach`` (m), nearest first, each raised out of
+    what it would then overlap of ``context`` to ``clearance`` (m).
+
+    Returns
+    -------
+    list of (4, 4) poses; empty when nothing carries it.
+    """
+    rest = attempt["result"].pose
+    world.set_pose(oid, rest)
+    own = world.com_position(oid)
+    carriers = [q for q in attempt["touching"] if q in world.bodies and q not in fixed
+                and world.bodies[q].props is not None and world.com_position(q)[2] < own[2]]
+    if not carriers:
+        return []
+    masses = np.array([world.bodies[q].props.mass for q in carriers])
+    centre = masses @ np.array([world.com_position(q) for q in carriers]) / masses.sum()
+    offset = centre[:2] - own[:2]
+    out = []
+    for share in CENTRE_FRACTIONS:
+        shift = share * offset
+        length = float(np.linalg.norm(shift))
+        start = np.array(rest, dtype=float, copy=True)
+        start[:2, 3] += shift * (min(1.0, reach / length) if length > 0 else 0.0)
+        world.set_pose(oid, start)
+        gaps = world.distances(oid, context, clearance)
+        if gaps and min(gaps.values()) < 0:
+            start[2, 3] += clearance / 2 - min(gaps.values())
+        out.append(start)
     return out
 
 

@@ -430,7 +430,8 @@ def load_carriers(world: BulletWorld, name: str, near: list[str], fixed, tol: fl
 
 
 def gives_way(world: BulletWorld, name: str, carriers: list[str], frames: int, tol_pos: float,
-              tol_rot_deg: float, rest: SettleParams | None = None) -> tuple[list[str], int]:
+              tol_rot_deg: float, rest: SettleParams | None = None,
+              motions: dict[str, tuple[float, float]] | None = None) -> tuple[list[str], int]:
     """Which of ``name`` and its ``carriers`` move when the carriers, frozen so far, are released under it.
 
     Sequential settling tests an object against a frozen context: a book leaning on a box, a plank on the edge of
@@ -455,6 +456,8 @@ def gives_way(world: BulletWorld, name: str, carriers: list[str], frames: int, t
     rest
         The settling criterion: with it, the run ends early once every body is at rest by it (nothing moves
         any more; ``None``: always ``frames`` frames).
+    motions
+        Filled, when given, with each body's motion over the run: (m, deg).
 
     Returns
     -------
@@ -482,6 +485,10 @@ def gives_way(world: BulletWorld, name: str, carriers: list[str], frames: int, t
                 if all([w.observe() for w in windows]):
                     break
         moved_out = [b for b in bodies if moved_past(start[b], world.pose(b), tol_pos, tol_rot_deg)]
+        if motions is not None:
+            for b in bodies:
+                moved, turned = window_motion(start[b], world.pose(b))
+                motions[b] = (moved, float(np.degrees(turned)))
     finally:
         for c in carriers:
             world.set_static(c)
