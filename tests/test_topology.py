@@ -614,6 +614,7 @@ def test_head_noun_of_descriptions():
     assert head_noun("wooden cabinet partially visible in the bottom left") == "cabinet"
     assert names_furniture("white oval table") and names_furniture("light wood nightstand")
     assert not names_furniture("desk lamp") and not names_furniture("vase on the table")
+    assert names_furniture("white shelf 1.0 m") and not names_furniture("wooden wall-mounted shelf 54 cm")
 
 
 def table_over_chairs(root, table_description, lift=0.06):
@@ -629,7 +630,8 @@ def table_over_chairs(root, table_description, lift=0.06):
     return Scene([SceneObject(o.id, o.mesh_path, o.pose, description=descriptions[o.id]) for o in scene.objects])
 
 
-@pytest.mark.parametrize("description, on_floor", [("white oval table", True), ("wooden crate", False)])
+@pytest.mark.parametrize("description, on_floor", [("white oval table", True), ("grey shelf 97 cm", True),
+                                                   ("wooden crate", False)])
 def test_floor_furniture_stands_on_the_floor_not_on_the_chairs_under_it(tmp_path, description, on_floor):
     from phiscene.topology.geometric import GeometricParams, infer
 

@@ -6,7 +6,8 @@ over the chairs' seats. Read from near contact alone, such a scene says the tabl
 on each other, and a scene grounded on that graph collapses when it is released as a whole. Furniture is made to
 stand on the floor, so the geometric backend takes the description as a prior (:func:`floor_standing`, setting
 ``topology.geometric.floor_reach``): an object whose description's head noun names floor furniture
-(:data:`~phiscene.topology.words.FURNITURE_WORDS`) and whose bottom is within ``floor_reach`` of the ground keeps
+(:data:`~phiscene.topology.words.FURNITURE_WORDS`; not one it says is mounted) and whose bottom is within
+``floor_reach`` of the ground keeps
 only supporters that lie low themselves (a rug, a mat, a platform: their top within ``floor_reach`` of the ground)
 and its walls or objects it leans on, and gets the ground as a supporter. A chair stacked on a table, a stool on a
 desk, a table lamp (head noun "lamp") or anything whose bottom is higher are left as the geometry says.

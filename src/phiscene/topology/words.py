@@ -32,7 +32,8 @@ PARTIAL_WORDS = ("partially", "partly", "partial", "occluded", "truncated", "cro
 #: Head nouns of furniture that stands on the floor.
 FURNITURE_WORDS = ("chair", "chairs", "armchair", "table", "tables", "desk", "sofa", "couch", "bed", "cabinet",
                    "dresser", "wardrobe", "bookshelf", "bookcase", "nightstand", "stool", "bench", "ottoman",
-                   "sideboard", "cupboard", "drawers", "refrigerator", "fridge", "piano", "armoire", "credenza")
+                   "sideboard", "cupboard", "drawers", "refrigerator", "fridge", "piano", "armoire", "credenza",
+                   "shelf", "shelves", "shelving", "rack", "stand", "chest")
 #: Words after the head noun that do not name another object ("wooden cabinet partially visible", "chair 87 cm").
 TRAILING = ("partially", "partly", "visible", "occluded", "cut", "off", "cropped", "cm", "mm", "m", "x")
 
@@ -84,8 +85,9 @@ def head_noun(description: str) -> str:
 
 
 def names_furniture(description: str) -> bool:
-    """Whether a description's head noun (:func:`head_noun`) is floor furniture (:data:`FURNITURE_WORDS`)."""
-    return head_noun(description) in FURNITURE_WORDS
+    """Whether a description's head noun (:func:`head_noun`) is floor furniture (:data:`FURNITURE_WORDS`) and it does
+    not say the object is mounted (:func:`says_mounted`: a wall-mounted shelf)."""
+    return head_noun(description) in FURNITURE_WORDS and not says_mounted(description)
 
 
 def says_against_wall(description: str) -> bool:
