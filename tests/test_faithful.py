@@ -326,6 +326,39 @@ def test_a_box_sunk_into_a_plinth_near_the_floor_is_lifted_onto_it_not_slid_out(
     assert np.linalg.norm((lo + hi)[:2] / 2 - [0.1, 0.0]) < 0.01  # where it was put
 
 
+def test_a_box_through_a_coarse_grid_shelf_board_is_lifted_onto_the_board(tmp_path):
+    """A floor shelf (1 m wide, 60 cm tall, 1.5 cm boards; its bottom board's top 5.75 cm above the floor) whose SDF
+    grid is coarse (16 points along its width: error up to 4 cm, more than eps + contact_tol); a 10 cm box read as
+    on the floor alone, sunk 2.75 cm through the bottom board (its bottom under the board's underside). Out
+    sideways along the floor is 20 cm; up onto the board 2.75 cm + eps. The lift stops where the coarse grid reads
+    it clear, and the box is taken as resting on the board within the grid's error: it ends on the board where it
+    was put."""
+    from phiscene.proxies import Proxy
+
+    t = 0.015
+    parts = [trimesh.creation.box((1.0, 0.3, t)).apply_translation((0, 0, 0.05)),
+             trimesh.creation.box((t, 0.3, 0.6)).apply_translation((-0.5, 0, 0.3)),
+             trimesh.creation.box((t, 0.3, 0.6)).apply_translation((0.5, 0, 0.3)),
+             trimesh.creation.box((1.0, 0.3, t)).apply_translation((0, 0, 0.6 - t / 2))]
+    meshes = {"shelf": save_mesh(trimesh.util.concatenate(parts), tmp_path / "shelf.obj"),
+              "box": save_mesh(trimesh.creation.box((0.1, 0.1, 0.1)), tmp_path / "box.obj")}
+    top = 0.05 + t / 2
+    scene = box_scene(meshes, {"shelf": ("shelf", make_pose()),
+                               "box": ("box", make_pose(translation=(0.1, 0.0, top - 0.0275 + 0.05)))})
+    g = graph_of(scene, [("ground", "shelf", "supports"), ("ground", "box", "supports")])
+    proxies = convex_proxies(scene, tmp_path / "cache")
+    proxies["shelf"] = Proxy(hulls=[np.asarray(p.vertices) for p in parts], volume_ratio=1.0, max_outside=0.0)
+    params = AssemblyParams.from_dict({"faithful": {"enabled": True},
+                                       "penetration_params": {**PHI_SCENE_SDF, "grid": {"resolution": 16}}})
+    out, rec = ground_scene(scene, g.order, proxies, params, SIM, tmp_path / "cache", graph=g)
+    box, shelf = rec["objects"]["box"], rec["objects"]["shelf"]
+    assert shelf["sdf_grid_error"] > params.penetration_params.eps + params.faithful.contact_tol
+    assert box["sdf_lifted"]["onto"] == ["shelf"] and box["certificate"]["supporters"] == ["shelf"]
+    lo, hi = out.get("box").world_mesh().bounds
+    assert lo[2] == pytest.approx(top, abs=0.003) and np.linalg.norm((lo + hi)[:2] / 2 - [0.1, 0.0]) < 0.01
+    assert box["certificate"]["settled"] and box["certificate"]["remedy"] == "none"
+
+
 def test_a_block_sunk_into_a_round_plate_is_lifted_onto_it_though_its_corners_overhang(work):
     # a round plate (16 cm across, 2 cm high) on the floor; a 20 x 10 x 5 cm block sunk into it down to the floor,
     # centred on it, which the graph puts on the floor alone. Its corners (11.2 cm from the centre) overhang the

@@ -11,7 +11,7 @@ FRONT3D = 9  # 3D-FRONT rooms (front3d_scene: their SAM 3D initial scenes go thr
 # import_sam3d levelled scenes without a given floor (they parted)
 PROXIES = 6
 TOPOLOGY = 13
-GROUND = 34
+GROUND = 35
 METRICS = 8
 TABLES = 7
 REPORT = 1

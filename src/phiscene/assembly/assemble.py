@@ -393,7 +393,9 @@ def _resolve_faithful(scene: Scene, oid: str, pose: np.ndarray, placed: list[Sdf
     """The faithful variant's SDF stage: :func:`_resolve`, horizontally only for an object on the floor alone
     (:func:`_on_the_floor`), moved up and out instead where that is much shorter (:func:`upward_clearance`: straight
     up or up and sideways, then lowered onto what lies there), at most ``max_shift``, and
-    leaves it resting on placed objects (``FaithfulParams.floor_lift``: ``info["below"]`` becomes those objects,
+    leaves it resting on placed objects (within ``eps + contact_tol`` plus the largest grid error of the placed
+    objects it may rest on: their grids set where the lift stops; ``FaithfulParams.floor_lift``: ``info["below"]``
+    becomes those objects,
     ``rec["sdf_lifted"]`` says so). ``poses`` are the placed objects' (id -> (4, 4)), ``world_meshes`` a cache
     of their world meshes."""
     mesh = scene.get(oid).mesh()
@@ -412,8 +414,11 @@ def _resolve_faithful(scene: Scene, oid: str, pose: np.ndarray, placed: list[Sdf
     lifted[:3, 3] += lift
     near = {q: _placed_mesh(scene, q, poses, world_meshes) for q in rec["sdf_context"] if q in poses}
     bottom = np.vstack([info["points"], sample_surface(mesh, beneath.RESTING_SAMPLES, pp.seed)])
+    # the lift ends clear by eps in the placed objects' grids, which may read a thin board thicker than its mesh
+    # by up to their error (a floor shelf's boards: 3.9 cm): resting within that too
+    slack = max([b.scale * b.grid.error.get("max_abs", 0.0) for b in placed if b.id in near] + [0.0])
     holders = beneath.resting_on(transform_points(lifted, bottom), resting.com_world(lifted, info["com"]), near,
-                                 scene.ground_height, pp.eps + fp.contact_tol)
+                                 scene.ground_height, pp.eps + fp.contact_tol + slack)
     if not holders:
         return out
     rec["sdf_lifted"] = {"onto": holders, "planar_translation": [rounded(v) for v in out[:3, 3] - pose[:3, 3]]}
