@@ -263,7 +263,9 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
             t = min(tipping, key=lambda t: t["cost"])
             mass(t["com"], t["base"])
             for start in _centred_starts(world, oid, t, info["fixed"], context, fp.contact_tol / 2, fp.max_shift):
-                if attempt("centred", start, origin=start)["ok"]:
+                moved = attempt("centred", start, origin=start)
+                moved["source"] = t  # its body (declared centre of mass, completed base) is t's
+                if moved["ok"]:
                     break
     ok = [t for t in tried if t["ok"]]
     if not ok and fp.tilt_test > 0 and not info["leaning"]:
@@ -299,9 +301,10 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
                        attempts=len(tried), visible_share=rounded(share))
             return kept
     result = best["result"]
-    if "flush" in best:  # started from the photo's orientation: the flush of _faithful_start undone
-        info["flush_angle"] = best["flush"]
-        rec["flush_angle"] = rounded(best["flush"])
+    source = best.get("source", best)  # a centred start: the attempt whose rest it moved, body and turn included
+    if "flush" in source:  # started from the photo's orientation: the flush of _faithful_start undone
+        info["flush_angle"] = source["flush"]
+        rec["flush_angle"] = rounded(source["flush"])
     if not best["ok"]:
         remedy = "closest"
     else:
@@ -309,12 +312,13 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
     reason = "; ".join(f"{t['label']}: {t['why']}" for t in tried if t is not best or not best["ok"])
     final = result.pose
     mass(best["com"], best["base"])
-    if best["com"] is not None and best["com"] is not com and best["label"].split()[0] in ("ballast", "base"):
+    if best["com"] is not None and best["com"] is not com and source["label"].split()[0] in ("ballast", "base"):
         # declared by the remedy (a base start keeps the input's own declared centre when the ballast had none)
         lowered = resting.com_world(final, own)[2] - resting.com_world(final, best["com"])[2]
         rec["ballast"] = {"com": [rounded(v, 12) for v in best["com"]], "lowered": rounded(lowered)}
     if best["base"] is not None:
-        rec["base"] = {"points": np.asarray(best["base"]).round(12).tolist(), "share": float(best["label"].split()[1])}
+        rec["base"] = {"points": np.asarray(best["base"]).round(12).tolist(),
+                       "share": float(source["label"].split()[1])}
     world.set_pose(oid, final)
     rec["touching"] = best["touching"]
     world.set_static(oid)
