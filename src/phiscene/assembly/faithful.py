@@ -245,12 +245,11 @@ class FaithfulParams(Params):
         Remedy ``centred``: when no start is accepted and one came to rest in place and holds when tilted, but it
         or its carriers move past the slide bound or turn past ``max_turn`` when they are released under it
         (:func:`~phiscene.assembly.settle.gives_way`; a carrier that only rocks is left to joint settling), that
-        rest is tried again moved
-        horizontally ``CENTRE_FRACTIONS`` (:mod:`phiscene.assembly.guarded`) of the way from the object's centre
-        of mass to its carriers' (the free placed objects it touches there whose centre of mass lies lower than
-        its own, mass-weighted), at most ``max_shift``, nearest first.
-        Without it such an object takes the fallback at rest on carriers that tip once the scene is released
-        together: a tall stack then collapses in joint settling.
+        rest is tried again moved horizontally ``CENTRE_FRACTIONS`` (:mod:`phiscene.assembly.guarded`) of the way
+        from the object's centre of mass to its carriers' (the free placed objects it touches there whose centre
+        of mass lies lower than its own, mass-weighted), at most ``max_shift``, nearest first. Without it such an
+        object takes the fallback at rest on carriers that tip once the scene is released together: a tall stack
+        then collapses in joint settling.
     ray
         With the photo's camera (:func:`~phiscene.assembly.assemble.ground_scene` ``eye``), close part of an
         object's vertical gap to what holds it (floating, or sunk in) by moving it along the camera ray through its

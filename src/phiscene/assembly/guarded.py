@@ -337,12 +337,18 @@ def _unflushed(world, oid: str, pose: np.ndarray, info: dict, below: list[str], 
     from scipy.spatial.transform import Rotation
 
     back = Rotation.from_matrix(info["flush_rotation"].T).as_rotvec()
-    out = turned_about(pose, back, resting.com_world(pose, info["com"]))
-    world.set_pose(oid, out)
-    gaps = world.distances(oid, _stoppers(world, below), clearance)
+    return _raised_clear(world, oid, turned_about(pose, back, resting.com_world(pose, info["com"])),
+                         _stoppers(world, below), clearance)
+
+
+def _raised_clear(world, oid: str, pose: np.ndarray, others: list[str], clearance: float) -> np.ndarray:
+    """``pose`` (4, 4), raised straight up out of the deepest overlap of body ``oid`` there with ``others`` to
+    ``clearance / 2`` (m) above it; unchanged where nothing overlaps. Changes ``pose`` in place and returns it."""
+    world.set_pose(oid, pose)
+    gaps = world.distances(oid, others, clearance)
     if gaps and min(gaps.values()) < 0:
-        out[2, 3] += clearance / 2 - min(gaps.values())
-    return out
+        pose[2, 3] += clearance / 2 - min(gaps.values())
+    return pose
 
 
 def _centred_starts(world, oid: str, attempt: dict, fixed, context: list[str], clearance: float,
@@ -362,12 +368,13 @@ def _centred_starts(world, oid: str, attempt: dict, fixed, context: list[str], c
     rest = attempt["result"].pose
     world.set_pose(oid, rest)
     own = world.com_position(oid)
-    carriers = [q for q in attempt["touching"] if q in world.bodies and q not in fixed
-                and world.bodies[q].props is not None and world.com_position(q)[2] < own[2]]
+    coms = {q: world.com_position(q) for q in attempt["touching"]
+            if q in world.bodies and q not in fixed and world.bodies[q].props is not None}
+    carriers = [q for q, c in coms.items() if c[2] < own[2]]
     if not carriers:
         return []
     masses = np.array([world.bodies[q].props.mass for q in carriers])
-    centre = masses @ np.array([world.com_position(q) for q in carriers]) / masses.sum()
+    centre = masses @ np.array([coms[q] for q in carriers]) / masses.sum()
     offset = centre[:2] - own[:2]
     out = []
     for share in CENTRE_FRACTIONS:
@@ -375,11 +382,7 @@ def _centred_starts(world, oid: str, attempt: dict, fixed, context: list[str], c
         length = float(np.linalg.norm(shift))
         start = np.array(rest, dtype=float, copy=True)
         start[:2, 3] += shift * (min(1.0, reach / length) if length > 0 else 0.0)
-        world.set_pose(oid, start)
-        gaps = world.distances(oid, context, clearance)
-        if gaps and min(gaps.values()) < 0:
-            start[2, 3] += clearance / 2 - min(gaps.values())
-        out.append(start)
+        out.append(_raised_clear(world, oid, start, context, clearance))
     return out
 
 
