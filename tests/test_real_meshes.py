@@ -213,3 +213,35 @@ def test_a_decimation_that_loses_part_of_the_mesh_is_redone_with_more_faces(monk
     assert proxies.decimated_faithfully(mesh, 2000, 0.02) is mesh and budgets == [2000, 8000]
     budgets.clear()
     assert proxies.decimated_faithfully(mesh, 2000, 0.0) is a and budgets == [2000]
+
+
+def test_a_decomposition_that_fills_the_space_under_a_table_is_redone_with_more_hulls(tmp_path):
+    """Two hulls for a table on four legs must join legs: the piece spanning them fills the space under the top,
+    where a point 0.3 m below the top's centre lies in no part of the mesh, and reaches far beyond the mesh (the
+    leg height against a 1.4 m diagonal). That set used its whole cap and reaches farther than ``refine_excess``
+    of the diagonal, so it is decomposed again with ``refine_max_hulls``; the finer set leaves the probe outside
+    and reaches less far, and the record keeps the first set's count and excess. Each set is cached on its own:
+    asked again, nothing is decomposed."""
+    from phiscene.proxies import proxy_for_mesh
+
+    path = tmp_path / "table.obj"
+    table_mesh().export(path)
+    diag = float(np.linalg.norm(table_mesh().extents))
+    probe = np.array([[0.0, 0.0, 0.4]])
+    light = dict(mcts_iterations=10, mcts_nodes=8, resolution=300, max_hulls=2, refine_max_hulls=8)
+
+    def inside(px):
+        return any(trimesh.convex.convex_hull(h).contains(probe)[0] for h in px.hulls)
+
+    coarse = proxy_for_mesh(path, ProxyParams(**light, refine_excess=0.0), tmp_path / "cache")
+    assert len(coarse.hulls) == 2 and inside(coarse) and coarse.excess > 0.03 * diag
+    assert "refined" not in coarse.meta
+    fine = proxy_for_mesh(path, ProxyParams(**light), tmp_path / "cache")
+    assert 2 < len(fine.hulls) <= 8 and not inside(fine) and fine.excess < coarse.excess
+    assert fine.meta["refined"] == {"hulls": 2, "excess": coarse.excess, "kept": True}
+    assert len(list((tmp_path / "cache" / "proxies").glob("*.npz"))) == 2
+    again = proxy_for_mesh(path, ProxyParams(**light), tmp_path / "cache")
+    assert [h.tolist() for h in again.hulls] == [h.tolist() for h in fine.hulls]
+    # a cap the first set did not reach, or no larger second cap: no second decomposition
+    assert "refined" not in proxy_for_mesh(path, ProxyParams(**{**light, "refine_max_hulls": 2}),
+                                           tmp_path / "cache").meta

@@ -9,7 +9,7 @@ BENCHMARK = 8
 IMPORT = 11  # scenes imported from real data (rest3d_scene); BENCHMARK's number until they parted
 FRONT3D = 9  # 3D-FRONT rooms (front3d_scene: their SAM 3D initial scenes go through import_sam3d); BENCHMARK's until
 # import_sam3d levelled scenes without a given floor (they parted)
-PROXIES = 6
+PROXIES = 7
 TOPOLOGY = 13
 GROUND = 35
 METRICS = 8
