@@ -242,6 +242,6 @@ def test_a_decomposition_that_fills_the_space_under_a_table_is_redone_with_more_
     assert len(list((tmp_path / "cache" / "proxies").glob("*.npz"))) == 2
     again = proxy_for_mesh(path, ProxyParams(**light), tmp_path / "cache")
     assert [h.tolist() for h in again.hulls] == [h.tolist() for h in fine.hulls]
-    # a cap the first set did not reach, or no larger second cap: no second decomposition
+    # no second cap larger than the first: no second decomposition
     assert "refined" not in proxy_for_mesh(path, ProxyParams(**{**light, "refine_max_hulls": 2}),
                                            tmp_path / "cache").meta

@@ -537,11 +537,12 @@ def proxy_for_mesh(mesh_file: str | Path, params: ProxyParams, cache_dir: str | 
     the smaller excess is returned, its ``meta["refined"]`` recording the first one's hull count and excess.
     """
     mesh = load_mesh(mesh_file)
-    first = _decomposition(mesh, params, cache_dir)
+    mh = mesh_hash(mesh)
+    first = _decomposition(mesh, mh, params, cache_dir)
     if not (params.refines() and first.meta.get("route") in ("solid", "decomposed")
             and len(first.hulls) >= params.max_hulls and first.excess > params.refine_excess * _diagonal(mesh)):
         return first
-    finer = _decomposition(mesh, replace(params, max_hulls=params.refine_max_hulls), cache_dir)
+    finer = _decomposition(mesh, mh, replace(params, max_hulls=params.refine_max_hulls), cache_dir)
     log.info("%s: %d hulls reach %.4f m beyond it; with up to %d: %d hulls, %.4f m", Path(mesh_file).name,
              len(first.hulls), first.excess, params.refine_max_hulls, len(finer.hulls), finer.excess)
     best = finer if finer.excess < first.excess else first
@@ -549,11 +550,12 @@ def proxy_for_mesh(mesh_file: str | Path, params: ProxyParams, cache_dir: str | 
     return replace(best, seconds=first.seconds + finer.seconds, meta={**best.meta, "refined": refined})
 
 
-def _decomposition(mesh: trimesh.Trimesh, params: ProxyParams, cache_dir: str | Path) -> Proxy:
-    """One decomposition of ``mesh`` with its fidelity, from the cache or computed and cached."""
+def _decomposition(mesh: trimesh.Trimesh, mh: str, params: ProxyParams, cache_dir: str | Path) -> Proxy:
+    """One decomposition of ``mesh`` (content hash ``mh``) with its fidelity, from the cache or computed and
+    cached."""
     import time
 
-    mh, ph = mesh_hash(mesh), params.digest()
+    ph = params.digest()
     path = Path(cache_dir) / "proxies" / f"{mh}-{ph}.npz"
     cached = _read_entry(path, mh, ph)
     if cached is not None:
