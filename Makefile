@@ -17,7 +17,8 @@ all: $(STAMP)
 	$(BIN)/snakemake -j$(JOBS)
 
 # pytest-xdist runs the tests on $(JOBS) workers: 710 tests in 5 min 3 s on the 2-core machine (325f508 and its
-# docs, a fresh clone; 6 min 33 s with the install; 711 at 63d3993, not timed alone).
+# docs, a fresh clone; 6 min 33 s with the install; 711 tests in 8 min 37 s at 4f482ed on a slower day, 11 min 6 s
+# with the install).
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n $(JOBS)
 
