@@ -72,6 +72,35 @@ def test_solids_overlaps_and_inward_meshes_are_unchanged():
         assert outer_shell(m) is m
 
 
+
+def test_a_mesh_not_hollow_is_its_own_shell_whoever_asked_first():
+    # the shells are remembered by content: the same mesh as another object (the same file loaded again, an asset
+    # and its saved copy) must still get itself back, not the object first seen, or ``outer_shell(m) is m`` fails
+    # for it and its proxies take the route of hollow meshes
+    box = trimesh.creation.box([0.3, 0.2, 0.1])
+    twin = trimesh.Trimesh(box.vertices.copy(), box.faces.copy(), process=False)
+    assert outer_shell(box) is box
+    assert outer_shell(twin) is twin
+    fruit, _ = double_wall(radius=0.05, wall=0.002, subdivisions=3)  # hollow: a shell of its own either way
+    again = trimesh.Trimesh(fruit.vertices.copy(), fruit.faces.copy(), process=False)
+    a, b = outer_shell(fruit), outer_shell(again)
+    assert a is not fruit and b is not again and np.array_equal(a.faces, b.faces)
+
+
+def test_proxies_of_a_mesh_do_not_depend_on_what_was_decomposed_before(tmp_path):
+    # oracle: the same mesh decomposed in a fresh cache gives the same route and hulls as the first time, also when
+    # it is another object with that content and the first one's shell is still remembered in this process
+    from phiscene.meshes import save_mesh
+    from phiscene.proxies import proxy_for_mesh
+
+    mesh = trimesh.creation.annulus(0.05, 0.08, 0.04)  # not convex, not hollow: decomposed
+    params = ProxyParams(max_hulls=4, mcts_iterations=10, mcts_nodes=8, resolution=300)
+    first = proxy_for_mesh(save_mesh(mesh, tmp_path / "a.obj"), params, tmp_path / "cache_a")
+    second = proxy_for_mesh(save_mesh(mesh, tmp_path / "b.obj"), params, tmp_path / "cache_b")
+    assert first.meta["route"] == second.meta["route"] == "decomposed"
+    assert len(first.hulls) == len(second.hulls) and all(np.array_equal(x, y) for x, y in zip(first.hulls,
+                                                                                             second.hulls))
+
 def test_shell_params_rejects_bad_values():
     with pytest.raises(ValueError):
         ShellParams.from_dict({"resolution": 4})

@@ -250,8 +250,8 @@ def inner_faces(mesh: trimesh.Trimesh, params: ShellParams = ShellParams()) -> n
     return inner
 
 
-#: Per-process cache of outer shells by mesh content hash (least recently used evicted).
-_CACHE: "Memo[trimesh.Trimesh]" = Memo(256)
+#: Per-process cache of outer shells by mesh content hash (least recently used evicted); None: nothing dropped.
+_CACHE: "Memo[trimesh.Trimesh | None]" = Memo(256)
 #: Folder of the on-disk cache of inner-face masks (:func:`use_disk_cache`); ``None``: memory only.
 _DISK: Path | None = None
 
@@ -315,15 +315,18 @@ def outer_shell(mesh: trimesh.Trimesh, params: ShellParams = ShellParams()) -> t
 
     key = f"{mesh_hash(mesh)}-{params.digest()}"
 
-    def shell() -> trimesh.Trimesh:
+    def shell() -> trimesh.Trimesh | None:
         inner = _inner_mask(mesh, params, key)
         if not inner.any():
-            return mesh
+            return None
         got = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces)[~inner], process=False)
         got.remove_unreferenced_vertices()
         return got
 
-    return _CACHE.get(key, shell)
+    # nothing dropped is remembered as None, not as the mesh first seen: callers test ``outer_shell(m) is m``, and
+    # another object with the same content (the same file loaded again) must get itself back too
+    got = _CACHE.get(key, shell)
+    return mesh if got is None else got
 
 
 def solid_surface(mesh: trimesh.Trimesh, resolution: int) -> trimesh.Trimesh:
