@@ -128,7 +128,12 @@ def window_motion(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
 
 def moved_past(a: np.ndarray, b: np.ndarray, tol_pos: float, tol_rot_deg: float) -> bool:
     """Whether pose ``b`` (4, 4) lies farther than ``tol_pos`` (m) or ``tol_rot_deg`` from pose ``a``."""
-    moved, turned = window_motion(a, b)
+    return beyond(window_motion(a, b), tol_pos, tol_rot_deg)
+
+
+def beyond(motion: tuple[float, float], tol_pos: float, tol_rot_deg: float) -> bool:
+    """Whether a motion ``(m, rad)`` (:func:`window_motion`) goes farther than ``tol_pos`` (m) or ``tol_rot_deg``."""
+    moved, turned = motion
     return moved > tol_pos or np.degrees(turned) > tol_rot_deg
 
 
@@ -484,11 +489,10 @@ def gives_way(world: BulletWorld, name: str, carriers: list[str], frames: int, t
                 spent += 1
                 if all([w.observe() for w in windows]):
                     break
-        moved_out = [b for b in bodies if moved_past(start[b], world.pose(b), tol_pos, tol_rot_deg)]
+        motion = {b: window_motion(start[b], world.pose(b)) for b in bodies}  # (m, rad), each body once
+        moved_out = [b for b in bodies if beyond(motion[b], tol_pos, tol_rot_deg)]
         if motions is not None:
-            for b in bodies:
-                moved, turned = window_motion(start[b], world.pose(b))
-                motions[b] = (moved, float(np.degrees(turned)))
+            motions.update({b: (moved, float(np.degrees(turned))) for b, (moved, turned) in motion.items()})
     finally:
         for c in carriers:
             world.set_static(c)
