@@ -72,7 +72,6 @@ def test_solids_overlaps_and_inward_meshes_are_unchanged():
         assert outer_shell(m) is m
 
 
-
 def test_a_mesh_not_hollow_is_its_own_shell_whoever_asked_first():
     # the shells are remembered by content: the same mesh as another object (the same file loaded again, an asset
     # and its saved copy) must still get itself back, not the object first seen, or ``outer_shell(m) is m`` fails
@@ -100,6 +99,7 @@ def test_proxies_of_a_mesh_do_not_depend_on_what_was_decomposed_before(tmp_path)
     assert first.meta["route"] == second.meta["route"] == "decomposed"
     assert len(first.hulls) == len(second.hulls) and all(np.array_equal(x, y) for x, y in zip(first.hulls,
                                                                                              second.hulls))
+
 
 def test_shell_params_rejects_bad_values():
     with pytest.raises(ValueError):
