@@ -204,6 +204,12 @@ def test_value_rules_of_the_classes_run_too():
     config["topology"]["voxel"] = {}
     with pytest.raises(ConfigError, match=r"^config: topology: unknown backend 'voxel'"):
         check_config(config)
+    config = copy.deepcopy(CONFIG)
+    config["suites"]["real"]["proxies"]["refine_max_hulls"] = -1
+    with pytest.raises(ConfigError, match=r"^config: suites.real.proxies: .*refine_max_hulls must be >= 0"):
+        check_config(config)
+    with pytest.raises(jsonschema.ValidationError):  # the schema says the same
+        jsonschema.validate(config, SCHEMA)
 
 
 def test_unknown_top_level_section_rejected():

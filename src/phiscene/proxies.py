@@ -36,6 +36,8 @@ PROXY_VERSION = 8
 CLIP_TOLERANCE = 1e-4
 #: Routes a decomposition can take (recorded in ``Proxy.meta["route"]``).
 ROUTES = ("convex", "single_hull", "solid", "decomposed")
+#: Routes through the backend's decomposition: the ones :func:`proxy_for_mesh`'s refinement may redo.
+DECOMPOSED_ROUTES = ("solid", "decomposed")
 #: Settings of :func:`proxy_for_mesh`'s refinement, not of one decomposition (left out of its cache key).
 REFINE_KEYS = ("refine_excess", "refine_max_hulls")
 
@@ -118,7 +120,7 @@ class ProxyParams(Params):
     refine_max_hulls: int = 16
 
     def check(self) -> None:
-        """Reject an unknown ``backend`` or negative budgets (``ValueError``)."""
+        """Reject an unknown ``backend``, negative budgets or a tolerance out of range (``ValueError``)."""
         if self.backend not in ("coacd", "vhacd", "convex"):
             raise ValueError(f"proxy backend must be coacd, vhacd or convex, got {self.backend!r}")
         if self.max_faces < 0 or self.max_faces in range(1, 100):
@@ -132,6 +134,8 @@ class ProxyParams(Params):
             raise ValueError(f"proxy decimation_tolerance must be in [0, 1), got {self.decimation_tolerance}")
         if not 0.0 <= self.refine_excess < 1.0:
             raise ValueError(f"proxy refine_excess must be in [0, 1), got {self.refine_excess}")
+        if self.refine_max_hulls < 0:
+            raise ValueError(f"proxy refine_max_hulls must be >= 0 (0: never refine), got {self.refine_max_hulls}")
 
     def digest(self) -> str:
         """Cache key of one decomposition: every setting but the refinement's (:data:`REFINE_KEYS`), which
@@ -539,7 +543,7 @@ def proxy_for_mesh(mesh_file: str | Path, params: ProxyParams, cache_dir: str | 
     mesh = load_mesh(mesh_file)
     mh = mesh_hash(mesh)
     first = _decomposition(mesh, mh, params, cache_dir)
-    if not (params.refines() and first.meta.get("route") in ("solid", "decomposed")
+    if not (params.refines() and first.meta.get("route") in DECOMPOSED_ROUTES
             and len(first.hulls) >= params.max_hulls and first.excess > params.refine_excess * _diagonal(mesh)):
         return first
     finer = _decomposition(mesh, mh, replace(params, max_hulls=params.refine_max_hulls), cache_dir)
