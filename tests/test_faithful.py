@@ -1044,3 +1044,42 @@ def test_support_normal_of_a_tilted_table_top_under_an_object_at_its_rim():
     both = support_normal(block, {"table": table, "ground": None})
     mean = expected + np.array([0.0, 0.0, 1.0])
     assert math.degrees(math.acos(min(1.0, float(both @ (mean / np.linalg.norm(mean)))))) < 1e-6
+
+
+@pytest.mark.parametrize("sideways", ["always", "off_support"])
+def test_a_supporter_pushed_sideways_carries_what_it_holds_only_when_needed(work, sideways):
+    """The table (0.8 m square, 10 cm thick) overlaps a column standing on the floor by 3 cm along x; pushed out
+    horizontally (it stands on the floor alone) it moves 3 cm + eps (5 mm) along -x. The box on its centre is
+    still over the moved top: with ``carry_sideways: off_support`` it keeps its input position, with ``always``
+    it moves with the table."""
+    column = make_pose(translation=(0.42, 0.0, 0.15))  # its face at x = 0.37, inside the table's edge (0.4)
+    box = make_pose(translation=(0.0, 0.0, 0.1 + 0.05 + 0.001))
+    scene = scene_of(work, {"column": ("column", column), "table": ("table", TABLE), "box": ("box", box)})
+    g = graph_of(scene, [("ground", "column", "supports"), ("ground", "table", "supports"),
+                         ("table", "box", "supports")])
+    params = {"faithful": {"enabled": True, "carry_sideways": sideways}, "penetration_params": PHI_SCENE_SDF}
+    out, rec = run(work, scene, g, params=params)
+    table_xy = out.get("table").pose[:2, 3]  # the search's nearest direction: (-0.035, 0.007)
+    assert table_xy[0] == pytest.approx(-0.035, abs=0.003)  # out of the column by eps (the grids' error aside)
+    cert = rec["objects"]["box"]["certificate"]
+    assert cert["settled"] and cert["supporters_kept"]
+    lo = out.get("box").world_mesh().bounds[0]
+    assert lo[2] == pytest.approx(0.1, abs=0.003)  # on the table top
+    expected = np.zeros(2) if sideways == "off_support" else table_xy
+    assert np.linalg.norm(out.get("box").pose[:2, 3] - expected) < 0.003
+    assert bool(rec["objects"]["box"].get("carried_vertically")) == (sideways == "off_support")
+
+
+def test_a_box_left_beyond_its_moved_supporter_is_carried_with_it(work):
+    """The table moves 3.5 cm along -x (as above); a box near its +x edge (centre 1.5 cm inside it) would no longer be
+    over the top with its margin (half its half-width either side), so it is carried along with the table."""
+    from phiscene.assembly.starts import over_support
+
+    table = trimesh.creation.box((0.8, 0.8, 0.1))
+    box_points = np.asarray(trimesh.creation.box((0.1, 0.1, 0.1)).vertices)
+    moved = table.copy().apply_transform(make_pose(translation=(-0.035, 0.0, 0.05)))
+    inside = make_pose(translation=(0.30, 0.0, 0.15))
+    near_edge = make_pose(translation=(0.35, 0.0, 0.15))
+    assert over_support(inside, np.zeros(3), box_points, moved, 0.5)
+    assert not over_support(near_edge, np.zeros(3), box_points, moved, 0.5)  # 0.35 + 0.025 > 0.365, its edge
+    assert over_support(near_edge, np.zeros(3), box_points, moved, 0.0)  # its centre alone is still over it

@@ -332,7 +332,14 @@ def _faithful_start(scene: Scene, oid: str, proxy: Proxy | None, graph, poses: d
     info["fixed"] = set(attached)  # static for good: never released under a load
     carrier = next((q for q in info["below"] if q in poses), None)
     if fp.carry and carrier is not None:
-        pose = starts.carried(pose, info["com"], np.asarray(scene.get(carrier).pose, float), poses[carrier])
+        before = np.asarray(scene.get(carrier).pose, float)
+        if fp.carry_sideways == "off_support" and starts.over_support(
+                pose, info["com"], info["points"], _placed_mesh(scene, carrier, poses, world_meshes),
+                fp.carry_margin):
+            pose = starts.carried_vertically(pose, info["com"], before, poses[carrier])
+            rec["carried_vertically"] = True
+        else:
+            pose = starts.carried(pose, info["com"], before, poses[carrier])
         rec["carried_by"] = carrier
     if fp.ray and eye is not None and info["below"] and not info["leaning"]:
         pose, shift = starts.ray_corrected(pose, info["points"], info["com"], info["below_world"], scene.ground_height,

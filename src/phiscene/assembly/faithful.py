@@ -21,7 +21,9 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    supporter (``carry``, :func:`starts.carried`): it is translated as the point of
    the supporter under its centre of mass moved, so it stays over the same
    spot of its supporter; it is not turned with it (a supporter that toppled
-   would tip it over too; the flush correction sets its orientation).
+   would tip it over too; the flush correction sets its orientation). With
+   ``carry_sideways: off_support`` (``phi_scene``'s) it takes only the vertical part of that move while
+   it still stands over the moved supporter where the photo put it.
    With ``ray`` (off by default) and the photo's camera, it is then moved along the camera ray through it to
    close part of its gap to what holds it from below (it floats, or sinks in; :func:`starts.ray_corrected`): a
    monocular reconstruction errs mostly in depth, and the camera looks down, so an object put too far floats,
@@ -99,6 +101,8 @@ from phiscene.params import Params
 
 #: Relations whose parent carries the object from below (its surface normal matters for flushing).
 BELOW = ("supports", "contains")
+#: ``FaithfulParams.carry_sideways``: how much of its supporter's horizontal move a supported object takes.
+CARRY_SIDEWAYS = ("always", "off_support")
 
 
 @dataclass(frozen=True)
@@ -122,6 +126,15 @@ class FaithfulParams(Params):
         Largest rotation accepted from settling (deg).
     carry
         Move each object with its (first placed) supporter from below (:func:`starts.carried`).
+    carry_sideways
+        ``always``: the whole of that move; ``off_support``: only its vertical part
+        (:func:`starts.carried_vertically`) while the object's centre of mass, and the points ``carry_margin`` of
+        its horizontal half-extent from it along x and y, still lie over the moved supporter
+        (:func:`starts.over_support`), the whole move otherwise. The supporter's horizontal move is its own
+        correction (pushed out of a neighbour, a wall); what stands on it keeps where the photo put it while it
+        can stand there (a lamp on a side table pushed 12 cm out of a sofa).
+    carry_margin
+        That share (>= 0; 0: the centre of mass alone).
     planar_floor
         An object that stands on the floor alone (the ground is its only supporter from below, it leans on
         nothing) and whose lowest point is at most this far (m) above the ground is pushed out of the objects
@@ -292,6 +305,8 @@ class FaithfulParams(Params):
     max_slide_frac: float = 0.25
     max_turn: float = 10.0
     carry: bool = True
+    carry_sideways: str = "always"
+    carry_margin: float = 0.5
     planar_floor: float = 0.1
     floor_lift: float = 0.5
     joint_settle_frames: int = 240
@@ -333,6 +348,11 @@ class FaithfulParams(Params):
                     "shift_directions", "onto_reach", "planar_floor", "floor_lift", "load_frames", "reground_move"):
             if getattr(self, key) < 0:
                 raise ValueError(f"faithful parameter {key!r} must be >= 0, got {getattr(self, key)}")
+        if self.carry_sideways not in CARRY_SIDEWAYS:
+            raise ValueError(f"faithful carry_sideways must be one of {', '.join(CARRY_SIDEWAYS)}, got "
+                             f"{self.carry_sideways!r}")
+        if self.carry_margin < 0:
+            raise ValueError(f"faithful parameter 'carry_margin' must be >= 0, got {self.carry_margin}")
         if self.load_depth < 1:
             raise ValueError(f"faithful parameter 'load_depth' must be >= 1, got {self.load_depth}")
         if not 0.0 <= self.retry_damping < 1.0:
