@@ -1083,3 +1083,26 @@ def test_a_box_left_beyond_its_moved_supporter_is_carried_with_it(work):
     assert over_support(inside, np.zeros(3), box_points, moved, 0.5)
     assert not over_support(near_edge, np.zeros(3), box_points, moved, 0.5)  # 0.35 + 0.025 > 0.365, its edge
     assert over_support(near_edge, np.zeros(3), box_points, moved, 0.0)  # its centre alone is still over it
+
+
+@pytest.mark.parametrize("drop", [0.0, 0.002])
+def test_the_joint_check_releases_the_scene_as_the_drift_metric_does(work, drop):
+    """With ``joint_drop`` the drift protocol's lift (``metrics.physical.upward_offset``) and ``joint_frames`` its
+    frames, each certificate's ``joint_drift`` is the pybullet drift metric of that object in the grounded scene
+    (a box tilted on a table, so that it has something to settle)."""
+    from phiscene.metrics.drift import drift_bullet
+    from phiscene.metrics.physical import PhysicalParams
+
+    R = Rotation.from_euler("x", 6, degrees=True).as_matrix()
+    scene = scene_of(work, {"table": ("table", TABLE), "box": ("box", make_pose(R, (0.1, 0.0, 0.16)))})
+    g = graph_of(scene, [("ground", "table", "supports"), ("table", "box", "supports")])
+    out, rec = run(work, scene, g, params={"faithful": {"enabled": True, "joint_drop": drop, "joint_frames": 120}})
+    metric = drift_bullet(out, convex_proxies(out, work["cache"]), PhysicalParams(upward_offset=drop, frames=120),
+                          SIM, work["cache"])
+    for oid in ("table", "box"):
+        got = rec["objects"][oid]["certificate"]["joint_drift"]
+        assert got[0] == pytest.approx(metric["objects"][oid]["drift_trans"], abs=1e-6)
+        assert got[1] == pytest.approx(metric["objects"][oid]["drift_rot"], abs=1e-4)
+    # flush on the table, the box lands back where it rested (the drift is measured from before the lift)
+    assert rec["objects"]["box"]["certificate"]["joint_drift"][0] < 1e-3
+    assert rec["objects"]["box"]["certificate"]["joint_stable"]

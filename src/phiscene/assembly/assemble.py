@@ -680,7 +680,8 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
 
 def _joint_check(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, cache_dir: Path, fp: FaithfulParams,
                  objects: dict[str, dict]) -> None:
-    """Release the grounded scene as a whole (the pybullet drift protocol, ``fp.joint_frames`` frames, no offset).
+    """Release the grounded scene as a whole (the pybullet drift protocol, ``fp.joint_frames`` frames, every free
+    object lifted by ``fp.joint_drop`` first).
 
     Adds ``joint_drift`` (m, deg) and ``joint_stable`` (within ``joint_tol`` / ``joint_tol_deg``) to each
     object's certificate: sequential settling tests each object against a frozen context only.
@@ -688,7 +689,8 @@ def _joint_check(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, cach
     from phiscene.metrics.drift import drift_bullet
     from phiscene.metrics.physical import PhysicalParams
 
-    drift = drift_bullet(scene, proxies, PhysicalParams(upward_offset=0.0, frames=fp.joint_frames), sim, cache_dir)
+    drift = drift_bullet(scene, proxies, PhysicalParams(upward_offset=fp.joint_drop, frames=fp.joint_frames), sim,
+                         cache_dir)
     for oid, d in drift["objects"].items():
         cert = objects[oid].get("certificate")
         if cert is not None:

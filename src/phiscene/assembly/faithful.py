@@ -160,6 +160,11 @@ class FaithfulParams(Params):
     joint_frames
         After that the whole scene is released for this many frames (0 = no check); each certificate gets
         ``joint_drift`` and ``joint_stable``.
+    joint_drop
+        That release lifts every free object by this much (m) first, as the drift protocol does
+        (``metrics.physical.upward_offset``, 2 mm), so that ``joint_stable`` answers what the drift metric will: a
+        box resting on a block that the release in place leaves alone may be thrown 48 cm by that drop. 0 = released
+        in place.
     joint_tol, joint_tol_deg
         ``joint_stable``: the object moved at most this far (m) and turned at most this much (deg).
     max_stable_angle
@@ -311,6 +316,7 @@ class FaithfulParams(Params):
     floor_lift: float = 0.5
     joint_settle_frames: int = 240
     joint_frames: int = 120
+    joint_drop: float = 0.0
     joint_tol: float = 0.005
     joint_tol_deg: float = 1.0
     max_stable_angle: float = 45.0
@@ -343,7 +349,7 @@ class FaithfulParams(Params):
     def check(self) -> None:
         """Reject negative bounds and ``retry_damping`` outside [0, 1) (``ValueError``)."""
         for key in ("max_flush_angle", "max_stable_angle", "max_candidates", "tilt_test", "tilt_frames",
-                    "joint_settle_frames", "joint_frames", "joint_tol", "joint_tol_deg", "max_slide",
+                    "joint_settle_frames", "joint_frames", "joint_drop", "joint_tol", "joint_tol_deg", "max_slide",
                     "max_slide_frac", "max_turn", "contact_tol", "retry_rolling_friction", "max_shift",
                     "shift_directions", "onto_reach", "planar_floor", "floor_lift", "load_frames", "reground_move"):
             if getattr(self, key) < 0:
