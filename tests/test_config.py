@@ -205,6 +205,11 @@ def test_value_rules_of_the_classes_run_too():
     with pytest.raises(ConfigError, match=r"^config: topology: unknown backend 'voxel'"):
         check_config(config)
     config = copy.deepcopy(CONFIG)
+    config["methods"]["phi_scene"]["assembly"]["faithful"]["carry_sideways"] = "never"
+    with pytest.raises(ConfigError, match=r"^config: methods.phi_scene.assembly.faithful: .*carry_sideways must be one "
+                                          r"of always, off_support, got 'never'"):
+        check_config(config)
+    config = copy.deepcopy(CONFIG)
     config["suites"]["real"]["proxies"]["refine_max_hulls"] = -1
     with pytest.raises(ConfigError, match=r"^config: suites.real.proxies: .*refine_max_hulls must be >= 0"):
         check_config(config)

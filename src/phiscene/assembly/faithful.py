@@ -162,8 +162,8 @@ class FaithfulParams(Params):
         ``joint_drift`` and ``joint_stable``.
     joint_drop
         That release lifts every free object by this much (m) first, as the drift protocol does
-        (``metrics.physical.upward_offset``, 2 mm), so that ``joint_stable`` answers what the drift metric will: a
-        box resting on a block that the release in place leaves alone may be thrown 48 cm by that drop. 0 = released
+        (``metrics.physical.upward_offset``, 2 mm), so that ``joint_stable`` answers what the drift metric will: an
+        object resting on another that the release in place leaves alone may be thrown 48 cm by that drop. 0 = released
         in place.
     joint_tol, joint_tol_deg
         ``joint_stable``: the object moved at most this far (m) and turned at most this much (deg).
@@ -347,18 +347,18 @@ class FaithfulParams(Params):
     hidden_share: float = 0.5
 
     def check(self) -> None:
-        """Reject negative bounds and ``retry_damping`` outside [0, 1) (``ValueError``)."""
+        """Reject negative bounds, an unknown ``carry_sideways`` and ``retry_damping`` outside [0, 1)
+        (``ValueError``)."""
         for key in ("max_flush_angle", "max_stable_angle", "max_candidates", "tilt_test", "tilt_frames",
                     "joint_settle_frames", "joint_frames", "joint_drop", "joint_tol", "joint_tol_deg", "max_slide",
                     "max_slide_frac", "max_turn", "contact_tol", "retry_rolling_friction", "max_shift",
-                    "shift_directions", "onto_reach", "planar_floor", "floor_lift", "load_frames", "reground_move"):
+                    "shift_directions", "onto_reach", "planar_floor", "floor_lift", "load_frames", "reground_move",
+                    "carry_margin"):
             if getattr(self, key) < 0:
                 raise ValueError(f"faithful parameter {key!r} must be >= 0, got {getattr(self, key)}")
         if self.carry_sideways not in CARRY_SIDEWAYS:
             raise ValueError(f"faithful carry_sideways must be one of {', '.join(CARRY_SIDEWAYS)}, got "
                              f"{self.carry_sideways!r}")
-        if self.carry_margin < 0:
-            raise ValueError(f"faithful parameter 'carry_margin' must be >= 0, got {self.carry_margin}")
         if self.load_depth < 1:
             raise ValueError(f"faithful parameter 'load_depth' must be >= 1, got {self.load_depth}")
         if not 0.0 <= self.retry_damping < 1.0:
