@@ -162,7 +162,7 @@ class FaithfulParams(Params):
         ``joint_drift`` and ``joint_stable``.
     joint_drop
         That release lifts every free object by this much (m) first, as the drift protocol does
-        (``metrics.physical.upward_offset``, 2 mm), so that ``joint_stable`` answers what the drift metric will: an
+        (``metrics.physical.upward_offset``, 2 mm), so that ``joint_stable`` comes from the drift metric's release: an
         object resting on another that the release in place leaves alone may be thrown 48 cm by that drop. 0 = released
         in place.
     joint_tol, joint_tol_deg
