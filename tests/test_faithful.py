@@ -1086,17 +1086,19 @@ def test_a_box_left_beyond_its_moved_supporter_is_carried_with_it(work):
 
 
 @pytest.mark.parametrize("drop", [0.0, 0.002])
-def test_the_joint_check_releases_the_scene_as_the_drift_metric_does(work, drop):
+def test_the_joint_check_releases_the_scene_as_the_drift_metric_does(work, tmp_path, drop):
     """With ``joint_drop`` the drift protocol's lift (``metrics.physical.upward_offset``) and ``joint_frames`` its
-    frames, each certificate's ``joint_drift`` is the pybullet drift metric of that object in the grounded scene
-    (a box tilted on a table, so that it has something to settle)."""
+    frames, each certificate's ``joint_drift`` is the pybullet drift metric of that object in the grounded scene as
+    written and read back (a box tilted on a table, so that it has something to settle)."""
     from phiscene.metrics.drift import drift_bullet
     from phiscene.metrics.physical import PhysicalParams
+    from phiscene.scene import load_scene, save_scene
 
     R = Rotation.from_euler("x", 6, degrees=True).as_matrix()
     scene = scene_of(work, {"table": ("table", TABLE), "box": ("box", make_pose(R, (0.1, 0.0, 0.16)))})
     g = graph_of(scene, [("ground", "table", "supports"), ("table", "box", "supports")])
     out, rec = run(work, scene, g, params={"faithful": {"enabled": True, "joint_drop": drop, "joint_frames": 120}})
+    out = load_scene(save_scene(out, tmp_path / "grounded" / "scene.json"))
     metric = drift_bullet(out, convex_proxies(out, work["cache"]), PhysicalParams(upward_offset=drop, frames=120),
                           SIM, work["cache"])
     for oid in ("table", "box"):

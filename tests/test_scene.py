@@ -8,7 +8,7 @@ import trimesh
 
 from phiscene.errors import InputError
 from phiscene.meshes import save_mesh
-from phiscene.scene import Scene, SceneObject, load_scene, save_scene
+from phiscene.scene import Scene, SceneObject, as_written, load_scene, save_scene
 from phiscene.transforms import make_pose, rotation_z
 
 
@@ -39,6 +39,23 @@ def test_round_trip(scene_file, tmp_path):
     assert s2.objects[1].mesh_path == s.objects[1].mesh_path
     w = s2.objects[0].world_mesh()
     assert np.isclose(w.volume, 0.1 * 0.2 * 0.3 * 1.2**3)
+
+
+def test_as_written_is_what_the_file_reads_back(scene_file, tmp_path):
+    # poses, a declared centre of mass and a completed base with more digits than a file keeps: as_written gives the
+    # very numbers that saving and loading give
+    s = load_scene(scene_file)
+    rng = np.random.default_rng(0)
+    s.objects[0].pose = s.objects[0].pose @ make_pose(rotation_z(1e-7 * np.pi), rng.normal(size=3) * 1e-3)
+    s.objects[0].com = rng.uniform(-0.04, 0.04, size=3) / 3.0
+    s.objects[0].base = rng.uniform(-0.04, 0.04, size=(4, 3)) / 3.0
+    back = load_scene(save_scene(s, tmp_path / "again" / "scene.json"))
+    written = as_written(s)
+    for o, w in zip(back.objects, written.objects):
+        assert np.array_equal(o.pose, w.pose)
+    assert np.array_equal(back.objects[0].com, written.objects[0].com)
+    assert np.array_equal(back.objects[0].base, written.objects[0].base)
+    assert not np.array_equal(written.objects[0].pose, s.objects[0].pose)  # the rounding did something
 
 
 @pytest.mark.parametrize("mutate, field, words", [
