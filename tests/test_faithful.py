@@ -1073,7 +1073,7 @@ def test_a_supporter_pushed_sideways_carries_what_it_holds_only_when_needed(work
 def test_a_box_left_beyond_its_moved_supporter_is_carried_with_it(work):
     """The table moves 3.5 cm along -x (as above); a box near its +x edge (centre 1.5 cm inside it) would no longer be
     over the top with its margin (half its half-width either side), so it is carried along with the table."""
-    from phiscene.assembly.starts import over_support
+    from phiscene.assembly.beneath import over_support
 
     table = trimesh.creation.box((0.8, 0.8, 0.1))
     box_points = np.asarray(trimesh.creation.box((0.1, 0.1, 0.1)).vertices)

@@ -264,12 +264,17 @@ def as_written(scene: Scene) -> Scene:
     runs on this one."""
     out = copy.deepcopy(scene)
     for o in out.objects:
-        o.pose = np.asarray(o.pose, dtype=float).round(WRITTEN_DECIMALS)
+        o.pose = _written(o.pose)
         if o.com is not None:
-            o.com = np.asarray(o.com, dtype=float).round(WRITTEN_DECIMALS)
+            o.com = _written(o.com)
         if o.base is not None:
-            o.base = np.asarray(o.base, dtype=float).round(WRITTEN_DECIMALS)
+            o.base = _written(o.base)
     return out
+
+
+def _written(values) -> np.ndarray:
+    """``values`` as a float array rounded to :data:`WRITTEN_DECIMALS`."""
+    return np.asarray(values, dtype=float).round(WRITTEN_DECIMALS)
 
 
 def scene_to_dict(scene: Scene, json_dir: Path) -> dict:
@@ -277,7 +282,7 @@ def scene_to_dict(scene: Scene, json_dir: Path) -> dict:
     objs = []
     for o in scene.objects:
         d = {"id": o.id, "description": o.description, "mesh": _rel(o.mesh_path, json_dir),
-             "pose": np.asarray(o.pose, dtype=float).round(WRITTEN_DECIMALS).tolist()}
+             "pose": _written(o.pose).tolist()}
         if o.color is not None:
             d["color"] = [int(c) for c in o.color]
         if o.meta:
@@ -285,9 +290,9 @@ def scene_to_dict(scene: Scene, json_dir: Path) -> dict:
         if o.attached is not None:
             d["attached"] = o.attached
         if o.com is not None:
-            d["com"] = [float(v) for v in np.asarray(o.com, dtype=float).round(WRITTEN_DECIMALS)]
+            d["com"] = [float(v) for v in _written(o.com)]
         if o.base is not None:
-            d["base"] = np.asarray(o.base, dtype=float).round(WRITTEN_DECIMALS).tolist()
+            d["base"] = _written(o.base).tolist()
         objs.append(d)
     out = {"format": FORMAT, "units": "m", "up": [0, 0, 1], "ground": {"height": float(scene.ground_height)},
            "objects": objs}

@@ -333,7 +333,7 @@ def _faithful_start(scene: Scene, oid: str, proxy: Proxy | None, graph, poses: d
     carrier = next((q for q in info["below"] if q in poses), None)
     if fp.carry and carrier is not None:
         before = np.asarray(scene.get(carrier).pose, float)
-        if fp.carry_sideways == "off_support" and starts.over_support(
+        if fp.carry_sideways == "off_support" and beneath.over_support(
                 pose, info["com"], info["points"], _placed_mesh(scene, carrier, poses, world_meshes),
                 fp.carry_margin):
             pose = starts.carried_vertically(pose, info["com"], before, poses[carrier])

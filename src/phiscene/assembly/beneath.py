@@ -1,12 +1,16 @@
 """What lies beneath an object: the vertical gap to its supporters' surfaces and what it rests on.
 
 Rays cast straight down from an object's lowest points onto its supporters' meshes (:func:`gap_under`), read as
-the gap that floats or sinks it (:func:`vertical_gap`) and as the objects it rests on (:func:`resting_on`).
+the gap that floats or sinks it (:func:`vertical_gap`) and as the objects it rests on (:func:`resting_on`); whether a
+supporter lies under an object's centre of mass and around it (:func:`over_support`).
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from phiscene.assembly.resting import com_world
+from phiscene.transforms import transform_points
 
 #: Surface samples of an object's mesh added to its shape's corners when :func:`resting_on` looks for what it rests
 #: on (``FaithfulParams.floor_lift``): a box on a round plate overhangs it at every corner, and its hull's corners
@@ -68,3 +72,30 @@ def resting_on(points: np.ndarray, com: np.ndarray, candidates: dict, ground_hei
             found.append(name)
             held = held or under
     return found if held else []
+
+
+def over_support(pose: np.ndarray, com_local: np.ndarray, points_local: np.ndarray, supporter_mesh,
+                 margin: float) -> bool:
+    """Whether the supporter's world mesh lies straight under the object's centre of mass and under the points
+    ``margin`` (a share of the object's horizontal half-extent) from it along +-x and +-y (world frame).
+
+    Parameters
+    ----------
+    pose : (4, 4) float
+        The object's pose.
+    com_local : (3,) float
+        Its centre of mass, local frame.
+    points_local : (n, 3) float
+        Points of its shape, local frame (its horizontal extent).
+    supporter_mesh : trimesh.Trimesh
+        The supporter at its grounded pose (world).
+    margin
+        Share of the half-extent (0: the centre of mass alone).
+    """
+    c = com_world(pose, com_local)
+    pts = transform_points(pose, np.asarray(points_local, dtype=float))
+    half = 0.5 * (pts[:, :2].max(axis=0) - pts[:, :2].min(axis=0)) * margin
+    probes = np.array([c, c + [half[0], 0, 0], c - [half[0], 0, 0], c + [0, half[1], 0], c - [0, half[1], 0]])
+    probes[:, 2] = float(np.asarray(supporter_mesh.bounds)[1, 2]) + 1.0  # rays from above the whole supporter
+    down = np.tile([0.0, 0.0, -1.0], (len(probes), 1))
+    return bool(np.all(supporter_mesh.ray.intersects_any(probes, down)))

@@ -130,7 +130,7 @@ class FaithfulParams(Params):
         ``always``: the whole of that move; ``off_support``: only its vertical part
         (:func:`starts.carried_vertically`) while the object's centre of mass, and the points ``carry_margin`` of
         its horizontal half-extent from it along x and y, still lie over the moved supporter
-        (:func:`starts.over_support`), the whole move otherwise. The supporter's horizontal move is its own
+        (:func:`beneath.over_support`), the whole move otherwise. The supporter's horizontal move is its own
         correction (pushed out of a neighbour, a wall); what stands on it keeps where the photo put it while it
         can stand there (a lamp on a side table pushed 12 cm out of a sofa).
     carry_margin

@@ -94,34 +94,6 @@ def carried_vertically(pose: np.ndarray, com_local: np.ndarray, supporter_before
     return out
 
 
-def over_support(pose: np.ndarray, com_local: np.ndarray, points_local: np.ndarray, supporter_mesh,
-                 margin: float) -> bool:
-    """Whether the supporter's world mesh lies straight under the object's centre of mass and under the points
-    ``margin`` (a share of the object's horizontal half-extent) from it along +-x and +-y (world frame).
-
-    Parameters
-    ----------
-    pose : (4, 4) float
-        The object's pose.
-    com_local : (3,) float
-        Its centre of mass, local frame.
-    points_local : (n, 3) float
-        Points of its shape, local frame (its horizontal extent).
-    supporter_mesh : trimesh.Trimesh
-        The supporter at its grounded pose (world).
-    margin
-        Share of the half-extent (0: the centre of mass alone).
-    """
-    c = com_world(pose, com_local)
-    pts = transform_points(pose, np.asarray(points_local, dtype=float))
-    half = 0.5 * (pts[:, :2].max(axis=0) - pts[:, :2].min(axis=0)) * margin
-    probes = np.array([c, c + [half[0], 0, 0], c - [half[0], 0, 0], c + [0, half[1], 0], c - [0, half[1], 0]])
-    top = float(np.asarray(supporter_mesh.bounds)[1, 2]) + 1.0
-    probes[:, 2] = np.maximum(probes[:, 2], top)
-    down = np.tile([0.0, 0.0, -1.0], (len(probes), 1))
-    return bool(np.all(supporter_mesh.ray.intersects_any(probes, down)))
-
-
 def along_ray(pose: np.ndarray, com_local: np.ndarray, eye: np.ndarray, gap: float, share: float,
               min_pitch_deg: float, max_shift: float) -> tuple[np.ndarray, float]:
     """``pose`` moved along the camera ray through its centre of mass so that it drops by ``share * gap`` (m).
