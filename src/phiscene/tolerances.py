@@ -67,3 +67,8 @@ TOL = Tolerances()
 
 #: Gravity along -z, m/s^2.
 GRAVITY = 9.81
+
+#: The drift protocol's lift (m) of every free object before it is released (``PhysicalParams.upward_offset``, paper
+#: supplement), and the lift of faithful grounding's last release (``FaithfulParams.joint_drop``) that judges its
+#: certificates by the same release.
+DRIFT_LIFT = 0.002

@@ -98,6 +98,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from phiscene.params import Params
+from phiscene.tolerances import DRIFT_LIFT
 
 #: Relations whose parent carries the object from below (its surface normal matters for flushing).
 BELOW = ("supports", "contains")
@@ -127,10 +128,10 @@ class FaithfulParams(Params):
     carry
         Move each object with its (first placed) supporter from below (:func:`starts.carried`).
     carry_sideways
-        ``always``: the whole of that move; ``off_support``: only its vertical part
+        ``off_support`` (the default): only the vertical part of that move
         (:func:`starts.carried_vertically`) while the object's centre of mass, and the points ``carry_margin`` of
         its horizontal half-extent from it along x and y, still lie over the moved supporter
-        (:func:`beneath.over_support`), the whole move otherwise. The supporter's horizontal move is its own
+        (:func:`beneath.over_support`), the whole move otherwise; ``always``: the whole move (before d401e72). The supporter's horizontal move is its own
         correction (pushed out of a neighbour, a wall); what stands on it keeps where the photo put it while it
         can stand there (a lamp on a side table pushed 12 cm out of a sofa).
     carry_margin
@@ -163,8 +164,8 @@ class FaithfulParams(Params):
     joint_drop
         That release lifts every free object by this much (m) first, as the drift protocol does
         (``metrics.physical.upward_offset``, 2 mm), so that ``joint_stable`` comes from the drift metric's release: an
-        object resting on another that the release in place leaves alone may be thrown 48 cm by that drop. 0 = released
-        in place.
+        object resting on another that the release in place leaves alone may be thrown 48 cm by that drop. Default: the
+        protocol's lift (:data:`phiscene.tolerances.DRIFT_LIFT`); 0 = released in place (before 688279f).
     joint_tol, joint_tol_deg
         ``joint_stable``: the object moved at most this far (m) and turned at most this much (deg).
     max_stable_angle
@@ -310,13 +311,13 @@ class FaithfulParams(Params):
     max_slide_frac: float = 0.25
     max_turn: float = 10.0
     carry: bool = True
-    carry_sideways: str = "always"
+    carry_sideways: str = "off_support"
     carry_margin: float = 0.5
     planar_floor: float = 0.1
     floor_lift: float = 0.5
     joint_settle_frames: int = 240
     joint_frames: int = 120
-    joint_drop: float = 0.0
+    joint_drop: float = DRIFT_LIFT
     joint_tol: float = 0.005
     joint_tol_deg: float = 1.0
     max_stable_angle: float = 45.0

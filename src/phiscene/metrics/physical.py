@@ -59,6 +59,7 @@ from phiscene.errors import InputError
 from phiscene.meshes import sample_surface
 from phiscene.params import Params
 from phiscene.sim.settings import SimSettings
+from phiscene.tolerances import DRIFT_LIFT
 
 if TYPE_CHECKING:
     from phiscene.proxies import Proxy
@@ -92,7 +93,7 @@ class PhysicalParams(Params):
     samples: int = 2048
     seed: int = 0
     include_ground: bool = True
-    upward_offset: float = 0.002
+    upward_offset: float = DRIFT_LIFT
     frames: int = 120
 
     def __post_init__(self):
