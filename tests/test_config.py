@@ -19,6 +19,7 @@ from phiscene.config import (
     ConfigError,
     check_config,
     deep_merge,
+    job_assembly,
     load_class,
     method_assembly,
     method_params,
@@ -97,6 +98,27 @@ def test_method_override_of_one_nested_key_keeps_the_other_keys_of_config_yaml(s
                 if shift:
                     assert getattr(getattr(defaults, name), key) != value, (name, key)
     assert p.penetration == base["penetration"] and p.settle == base["settle"]
+
+
+def test_job_assembly_leaves_out_faithful_settings_of_methods_without_faithful_grounding():
+    """A faithful setting changed in the global ``assembly`` changes the params of the methods that ground faithfully
+    only (Snakemake reruns a job whose params change): ``phi_scene_paper``'s stay those of the paper's loop."""
+    from phiscene.assembly.assemble import AssemblyParams
+
+    changed = copy.deepcopy(CONFIG)
+    changed["assembly"]["faithful"]["carry_margin"] = CONFIG["assembly"]["faithful"]["carry_margin"] + 0.25
+    check_config(changed, schema_sections(ROOT / "config/schema.yaml"))
+    assert job_assembly(changed, "phi_scene_paper") == job_assembly(CONFIG, "phi_scene_paper")
+    assert job_assembly(CONFIG, "phi_scene_paper")["faithful"] == {"enabled": False}
+    assert job_assembly(changed, "phi_scene")["faithful"]["carry_margin"] == \
+        CONFIG["assembly"]["faithful"]["carry_margin"] + 0.25
+    assert job_assembly(CONFIG, "phi_scene") == method_assembly(CONFIG, "phi_scene")
+    # what the paper's loop reads is the same: every setting but the faithful ones
+    paper = AssemblyParams.from_dict(job_assembly(CONFIG, "phi_scene_paper"))
+    full = AssemblyParams.from_dict(method_assembly(CONFIG, "phi_scene_paper"))
+    assert not paper.faithful.enabled and not full.faithful.enabled
+    assert {k: v for k, v in paper.to_dict().items() if k != "faithful"} == \
+        {k: v for k, v in full.to_dict().items() if k != "faithful"}
 
 
 @pytest.mark.workflow

@@ -7,7 +7,7 @@ names them in one place and offers the three things the workflow needs while it 
 - :func:`deep_merge`: a method's ``assembly:`` override (or a suite's ``benchmark:`` override) merged
   over the defaults key by key at every depth, so ``assembly: {penetration_params: {eps: 0.01}}``
   keeps the other ``penetration_params`` keys of ``config.yaml``;
-- :func:`method_assembly` and :func:`bench_settings`: the merged mappings that jobs receive;
+- :func:`method_assembly` (:func:`job_assembly`) and :func:`bench_settings`: the merged mappings that jobs receive;
 - :func:`check_config`: every parameter class run on its section (and on each merged override), so
   ``snakemake -n`` rejects a misspelled key before any job runs, with one line naming the config path
   and the key, e.g. ``config: assembly.penetration_params: unknown key 'epsilon' (known: backtrack_steps,
@@ -40,8 +40,8 @@ from typing import Any
 from phiscene.params import nested_params
 
 __all__ = ["METHOD_PARAMS", "SECTIONS", "SOURCE_PARAMS", "ConfigError", "bench_settings", "check_config",
-           "check_params", "deep_merge", "load_class", "method_assembly", "method_params", "packaged_config_path",
-           "schema_sections", "suite_generator", "suite_proxies"]
+           "check_params", "deep_merge", "job_assembly", "load_class", "method_assembly", "method_params",
+           "packaged_config_path", "schema_sections", "suite_generator", "suite_proxies"]
 
 def packaged_config_path() -> Path:
     """The workflow's ``config/config.yaml`` as shipped with the package (``phiscene/defaults/config.yaml``, a link
@@ -132,6 +132,20 @@ def scaling_settings(config: Mapping[str, Any]) -> dict:
 def method_assembly(config: Mapping[str, Any], method: str) -> dict:
     """The ``assembly`` settings of a ``phi_scene``-kind method: its override deep-merged over ``assembly``."""
     return deep_merge(config.get("assembly"), config["methods"][method].get("assembly"))
+
+
+def job_assembly(config: Mapping[str, Any], method: str) -> dict:
+    """The ``assembly`` settings a method's grounding jobs receive (their params): :func:`method_assembly`, less the
+    ``faithful`` settings of a method with faithful grounding off, which do not act on its result (the paper's loop).
+
+    A change to those settings (tuning ``phi_scene``'s faithful grounding in the global ``assembly``) then reruns
+    the faithful methods only, not ``phi_scene_paper`` and the ablations.
+    """
+    merged = method_assembly(config, method)
+    faithful = merged.get("faithful")
+    if isinstance(faithful, Mapping) and not faithful.get("enabled", False):
+        merged = {**merged, "faithful": {"enabled": False}}
+    return merged
 
 
 def suite_proxies(config: Mapping[str, Any], suite: str | None = None) -> dict:

@@ -247,8 +247,9 @@ def phi_scene_inputs(wildcards):
 
 
 def method_assembly(wildcards):
-    """Assembly settings of a job's phi_scene-kind method: its `assembly` override deep-merged over `assembly`."""
-    return phiscene.config.method_assembly(config, wildcards.method)
+    """Assembly settings of a job's phi_scene-kind method: its `assembly` override deep-merged over `assembly`, less
+    the faithful settings where faithful grounding is off (phiscene.config.job_assembly)."""
+    return phiscene.config.job_assembly(config, wildcards.method)
 
 
 def baseline_settings(wildcards):
