@@ -131,9 +131,10 @@ class FaithfulParams(Params):
         ``off_support`` (the default): only the vertical part of that move
         (:func:`starts.carried_vertically`) while the object's centre of mass, and the points ``carry_margin`` of
         its horizontal half-extent from it along x and y, still lie over the moved supporter
-        (:func:`beneath.over_support`), the whole move otherwise; ``always``: the whole move (before d401e72). The supporter's horizontal move is its own
-        correction (pushed out of a neighbour, a wall); what stands on it keeps where the photo put it while it
-        can stand there (a lamp on a side table pushed 12 cm out of a sofa).
+        (:func:`beneath.over_support`), the whole move otherwise; ``always``: the whole move (before d401e72).
+        The supporter's horizontal move is its own correction (pushed out of a neighbour, a wall); what stands
+        on it keeps where the photo put it while it can stand there (a lamp on a side table pushed 12 cm out of a
+        sofa).
     carry_margin
         That share (>= 0; 0: the centre of mass alone).
     planar_floor
