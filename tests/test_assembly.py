@@ -262,6 +262,46 @@ def test_direction_search_clears_where_gradient_steps_stall():
     assert min_translation_search(loss, np.zeros(3), search_directions(16, planar=True), 0.01, 0.05, 30) is None
 
 
+def test_direction_search_resumed_farther_out_finds_the_same_way_out():
+    """The search of the test above, marched to 5 cm only (nothing clears), then resumed beyond 5 cm with a coarser
+    step, along the axes (3 cm: its probes at 8 and 11 cm find the way out along y, 9.5 cm, before the one along x,
+    13 cm): the same way out, bisected to the analytic sqrt(r^2 - c^2)."""
+    r, c = 0.1, 0.03
+    centres = torch.tensor([[c, 0.0, 0.0], [-c, 0.0, 0.0]], dtype=torch.float64)
+
+    def loss(x):
+        return torch.relu(r - torch.linalg.vector_norm(x - centres, dim=1)).sum()
+
+    dirs = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0]])
+    assert min_translation_search(loss, np.zeros(3), dirs, 0.01, 0.05, 30) is None
+    found = min_translation_search(loss, np.zeros(3), dirs, 0.03, 0.2, 30, start=0.05)
+    assert abs(found[0]) < 1e-12 and abs(found[1]) == pytest.approx(np.sqrt(r * r - c * c), abs=1e-9)
+
+
+@pytest.mark.parametrize("doublings", [3, 0])
+def test_an_object_deep_inside_a_neighbour_is_searched_out_beyond_the_reach(work, monkeypatch, doublings):
+    """A 10 cm cube on the floor in the middle of a 1.6 m wide, 20 cm thick slab (a reconstruction that put a chair
+    through a table), pushed horizontally only: the nearest way out is 0.8 + 0.05 m + eps along x or y, farther
+    than ``search_reach`` (0.6 m). The search goes on beyond it and finds it; without the doublings the cube stays
+    inside."""
+    from phiscene.assembly import penetration
+
+    monkeypatch.setattr(penetration, "SEARCH_DOUBLINGS", doublings)
+    slab_m, cube_m = trimesh.creation.box((1.6, 1.6, 0.2)), trimesh.creation.box((0.1, 0.1, 0.1))
+    slab = _body("slab", slab_m, make_pose(translation=(0, 0, 0.1)), work["cache"])
+    cube = _body("cube", cube_m, make_pose(translation=(0.01, 0.02, 0.05)), work["cache"])
+    pp = PenetrationParams(optimizer="steepest", search_directions=32)
+    x, info = resolve_penetration(cube, [slab], 0.0, pp, planar=True)
+    if doublings == 0:
+        assert info["final_loss"] > 0
+        return
+    assert info["final_loss"] == 0.0 and info["searched"] and x[2] == pytest.approx(EPS, abs=1e-9)  # off the floor
+    # the nearest face is 0.78 m away along +y (the cube is 1 cm off centre in x, 2 cm in y)
+    assert np.linalg.norm(x[:2]) == pytest.approx(0.8 - 0.02 + 0.05 + EPS, abs=0.03)
+    moved = cube_m.copy().apply_translation(np.array([0.01, 0.02, 0.05]) + x)
+    assert clearance(moved, slab_m.copy().apply_translation((0, 0, 0.1))) > EPS - 3e-3
+
+
 def test_plank_jammed_across_a_gap_turns_free(work):
     """A 1 m plank whose two ends are each 1 cm inside a block from opposite sides (+x end from -y, -x end from +y,
     the blocks covering 0.3-0.8 m from the centre): no short translation clears both (sideways pushes cancel,

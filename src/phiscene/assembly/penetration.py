@@ -51,7 +51,10 @@ Choices the paper leaves open, and what we do:
   (:func:`min_translation_search`): ``search_directions`` unit directions (horizontal only when
   ``planar``) are marched out together in steps of ``search_step``, up to ``search_reach``; the first
   translation with a zero loss is bisected back to the zero-loss boundary. That is the smallest
-  translation that clears the overlap, to the step's resolution, wherever the gradient stalls. The
+  translation that clears the overlap, to the step's resolution, wherever the gradient stalls. None within
+  ``search_reach`` (a reconstruction that put a chair through a table, a bed through the wardrobe): the
+  march goes on to :data:`SEARCH_DOUBLINGS` doublings of the reach with a doubled step each; an object left
+  inside its neighbours is thrown metres when the scene is released together (and by the drift metric). The
   paper's loop keeps it off (0). The same search also checks a gradient solve that cleared the overlap by a
   long way (longer than ``rotate_over``): the gradient of a sum of hinge terms need not point along the
   shortest way out (a plate sunk 3 cm into the box it lies on, its rim over the box's edge, was pushed 18
@@ -425,6 +428,10 @@ OPTIMIZERS = {"adam": AdamState, "steepest": SteepestState}
 _SOLVERS = {**OPTIMIZERS, "steepest_joint": SteepestJointState}
 
 
+#: :func:`resolve_penetration`: when no direction clears the overlap within ``search_reach``, the search goes on
+#: out to this many doublings of it (0.6 m -> 4.8 m), each with a doubled step (as many probes per doubling).
+SEARCH_DOUBLINGS = 3
+
 def resolve_penetration(active: SdfBody, context: list[SdfBody], ground_height: float | None,
                         params: PenetrationParams, planes=(), planar: bool = False,
                         yaw_only: bool = False) -> tuple[np.ndarray, dict]:
@@ -467,16 +474,24 @@ def resolve_penetration(active: SdfBody, context: list[SdfBody], ground_height: 
                              params.optimizer)
     info["searched"] = False
 
-    def search(reach: float) -> np.ndarray | None:
+    def search(reach: float, start: float = 0.0, step: float = params.search_step) -> np.ndarray | None:
         base = np.zeros(3)
         if planar and ground_height is not None:  # only the ground moves a floor-standing object vertically
             base[2] = max(0.0, params.eps - (float(loss_fn.G.min()) - ground_height))
         return min_translation_search(loss_fn, base, _directions(params.search_directions, planar, yaw_only),
-                                      params.search_step, reach, params.backtrack_steps)
+                                      step, reach, params.backtrack_steps, start)
 
     length = float(np.linalg.norm(x))
     if info["final_loss"] > 0.0 and params.search_directions > 0:
         found = search(params.search_reach)
+        # none within reach: farther out, each doubling of the reach marched with a doubled step, before the
+        # object is left inside its neighbours (released with them, it would fling them across the room)
+        reach = params.search_reach
+        for k in range(1, SEARCH_DOUBLINGS + 1):
+            if found is not None:
+                break
+            found = search(2 * reach, start=reach, step=params.search_step * 2 ** k)
+            reach *= 2
         if found is not None:
             x = found
             info.update(searched=True, final_loss=0.0)
@@ -554,9 +569,9 @@ def directions_toward(axis, min_dot: float, n: int) -> np.ndarray:
 
 
 def min_translation_search(loss_fn: Callable, base: np.ndarray, directions: np.ndarray, step: float, reach: float,
-                           bisect_steps: int) -> np.ndarray | None:
+                           bisect_steps: int, start: float = 0.0) -> np.ndarray | None:
     """The smallest translation ``base + t d`` (over the unit ``directions`` (k, 3), ``t`` in steps of ``step`` up
-    to ``reach``) at which ``loss_fn`` is exactly zero, bisected back to the zero-loss boundary.
+    to ``reach``, beyond ``start``) at which ``loss_fn`` is exactly zero, bisected back to the zero-loss boundary.
 
     Every direction is marched out together, so the first zero found is the nearest one (to within ``step``);
     the march never stops inside a local minimum of the loss, where gradient steps stall.
@@ -572,6 +587,9 @@ def min_translation_search(loss_fn: Callable, base: np.ndarray, directions: np.n
         March step and farthest ``t`` (m).
     bisect_steps
         Bisection steps between the last positive and the first zero ``t``.
+    start
+        ``t`` already marched (m, a search resumed farther out with a coarser step): the march starts one step
+        beyond it, and ``base`` itself is not tested again.
 
     Returns
     -------
@@ -584,14 +602,14 @@ def min_translation_search(loss_fn: Callable, base: np.ndarray, directions: np.n
             return float(loss_fn(torch.as_tensor(v, dtype=torch.float64)))
 
     base = np.asarray(base, dtype=float)
-    if loss(base) == 0.0:
+    if start <= 0.0 and loss(base) == 0.0:
         return base
-    n_steps = int(np.ceil(reach / step))
+    n_steps = int(np.ceil((reach - start) / step))
     for i in range(1, n_steps + 1):
-        t = min(i * step, reach)
+        t = min(start + i * step, reach)
         for d in directions:
             if loss(base + t * d) == 0.0:
-                lo, hi = t - step, t
+                lo, hi = max(t - step, start), t
                 for _ in range(bisect_steps):
                     mid = 0.5 * (lo + hi)
                     if loss(base + mid * d) == 0.0:
