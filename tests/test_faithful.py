@@ -248,6 +248,47 @@ def test_an_object_the_joint_release_toppled_is_grounded_again_on_its_supporter(
     np.testing.assert_allclose(poses["table"], TABLE, atol=1e-4)
 
 
+def test_regrounding_that_brings_the_scene_down_when_released_together_is_undone(work, monkeypatch):
+    # the same toppled box, grounded again on the table (kept: closer to its input); this time the last joint
+    # release of the scene knocks the table over (stood in for: the release reports it turned 90 deg). The
+    # regrounded pose is undone: the poses, records, centres of mass and bases are those of the first joint rest
+    # again, and the box's reground record says it was not kept and what collapsed
+    import copy
+
+    from phiscene.assembly import assemble
+
+    pose = make_pose(translation=(0.1, -0.05, 0.1 + 0.05 + 0.002))
+    scene = scene_of(work, {"table": ("table", TABLE), "box": ("box", pose)})
+    g = graph_of(scene, [("ground", "table", "supports"), ("table", "box", "supports")])
+    params = AssemblyParams.from_dict(FAITHFUL)
+    toppled = make_pose(Rotation.from_euler("y", 90, degrees=True).as_matrix(), (0.5, -0.05, 0.05))
+    objects = {"table": {"joint_settle": [0.0, 0.0]},
+               "box": {"joint_settle": [0.4, 90.0], "certificate": {"remedy": "none", "touching": ["ground"]}}}
+    first = {"table": TABLE, "box": toppled}
+    masses, bases = {"table": np.array([0.0, 0.0, 0.01])}, {}
+    before = copy.deepcopy((objects, masses, bases))
+    real = assemble._joint_settle
+    released = []
+
+    def knocked_over(scene_, proxies, sim, cache_dir, fp, sp, objects_, coms, inputs):
+        poses = real(scene_, proxies, sim, cache_dir, fp, sp, objects_, coms, inputs)
+        released.append(poses["box"])
+        objects_["table"]["joint_settle"] = [0.3, 90.0]
+        return poses
+
+    monkeypatch.setattr(assemble, "_joint_settle", knocked_over)
+    poses = assemble._reground_collapsed(scene, g.order, convex_proxies(scene, work["cache"]), params, SIM,
+                                         work["cache"], g, {}, dict(first), objects,
+                                         {"table": np.zeros(3), "box": np.zeros(3)}, masses, bases, None)
+    assert len(released) == 1  # the box was grounded again and kept, and the scene released with it
+    assert np.linalg.norm(released[0][:3, 3] - pose[:3, 3]) < 0.01
+    assert set(poses) == set(first) and all(np.array_equal(poses[k], first[k]) for k in first)
+    reground = objects["box"].pop("reground")
+    assert not reground["kept"] and reground["undone"] == ["table"] and reground["remedy"]
+    assert objects == before[0] and masses.keys() == before[1].keys() and bases == before[2]
+    np.testing.assert_array_equal(masses["table"], before[1]["table"])
+
+
 @pytest.mark.parametrize("onto_reach", [0.3, 0.0])
 def test_column_balanced_on_an_edge_is_moved_inside_it(work, onto_reach):
     # the 0.3 m column stands on the slab with its centre of mass 4 mm inside the edge (x = 0.15): it settles, but

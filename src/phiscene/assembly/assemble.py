@@ -12,6 +12,7 @@ are not in the world.
 from __future__ import annotations
 
 import contextlib
+import copy
 import functools
 import logging
 import math
@@ -631,14 +632,23 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
     closeness`). The record gets ``reground`` (the new attempt's settling record and whether it was kept) and the
     certificate's remedy a ``+reground``.
 
+    That last joint settling may bring the scene down instead (:func:`_collapsed`: the vase put back on a dish
+    in a Gen3DSR reconstruction, released with it, tips the dish over and what stands on it). Then the regrounded
+    poses are undone: every record and the declared centres of mass and bases are those of the first joint
+    settling's rest again, and each regrounded object's ``reground`` gets ``kept`` false and ``undone`` (the ids
+    that collapsed).
+
     Returns
     -------
-    The poses (id -> (4, 4)) after the final joint settling (``poses`` when nothing was kept).
+    The poses (id -> (4, 4)) after the final joint settling (``poses`` when nothing was kept; the first joint
+    settling's when the final one collapsed).
     """
     from phiscene.sim.bullet import BulletWorld
 
     fp, pp = params.faithful, params.penetration_params
     kept = []
+    # the first joint settling's rest, to go back to if releasing the regrounded scene brings it down
+    before, saved = dict(poses), copy.deepcopy((objects, masses, bases))
     for oid in [o for o in order if o not in attached and _collapsed(objects[o], fp)]:
         obj = scene.get(oid)
         initial = np.asarray(obj.pose, dtype=float)
@@ -674,8 +684,28 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
                 cert["touching"] = rec.get("touching", cert["touching"])
     if not kept:
         return poses
-    return _joint_settle(_as_grounded(scene.with_poses(poses), attached, masses, bases), proxies, sim, cache_dir, fp,
-                         params.settle_params, objects, coms, {o: np.asarray(scene.get(o).pose, float) for o in order})
+    settled = _joint_settle(_as_grounded(scene.with_poses(poses), attached, masses, bases), proxies, sim, cache_dir,
+                            fp, params.settle_params, objects, coms,
+                            {o: np.asarray(scene.get(o).pose, float) for o in order})
+    fallen = [o for o in order if o not in attached and _collapsed(objects[o], fp)]
+    if not fallen:
+        return settled
+    # released together, the scene with the regrounded objects collapsed (a vase put back on a dish tips the dish
+    # over, and what stands on it): the regrounded poses are undone, the first joint settling's rest is kept
+    attempts = {oid: rec["reground"] for oid, rec in objects.items() if "reground" in rec}
+    restored, masses_before, bases_before = saved
+    objects.clear()
+    objects.update(restored)
+    masses.clear()
+    masses.update(masses_before)
+    bases.clear()
+    bases.update(bases_before)
+    for oid, attempt in attempts.items():
+        objects[oid]["reground"] = {**attempt, "kept": False, "undone": fallen} if oid in kept else attempt
+    if progress is not None:
+        progress(f"released together, the scene with {', '.join(kept)} grounded again collapsed ({', '.join(fallen)}):"
+                 f" kept as the scene came to rest before")
+    return before
 
 
 def _joint_check(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, cache_dir: Path, fp: FaithfulParams,
