@@ -45,6 +45,18 @@ def test_large_levelling_is_warned(tmp_path, caplog, tilt, warned):
     assert any("--up" in r.getMessage() for r in caplog.records) == warned
 
 
+@pytest.mark.parametrize("unit_scale,warned", [(1.0, False), (10.0, True), (0.012, True)])
+def test_a_scene_not_in_metres_is_warned(tmp_path, caplog, unit_scale, warned):
+    # the fixture's table, box, plate and poster (median 0.72 m across) scaled by 10 (a 16 m table, as a scene in
+    # decimetres read as metres) or by 0.012 (a 2 cm table): the import warns, naming --unit-scale; as is, it does not
+    import logging
+
+    write_scene(tmp_path, "s", (5.0, 2.0))
+    with caplog.at_level(logging.WARNING, logger="phiscene.io.placed"):
+        import_rest3d(tmp_path, "s", tmp_path / "out", params=PlacedParams(unit_scale=unit_scale, level=False))
+    assert any("--unit-scale" in r.getMessage() for r in caplog.records) == warned
+
+
 def test_table_top_only_scene_without_floor(tmp_path):
     """A close-up: only things on a table top, no table legs, no floor: the plate and box tops still vote."""
     R = Rotation.from_euler("xz", [15.0, -3.0], degrees=True).as_matrix()

@@ -47,6 +47,11 @@ log = logging.getLogger(__name__)
 IMPORT_FORMAT = "phiscene.placed_import/1"
 #: What a refused import suggests for a scene in other units than metres.
 UNIT_HINT = "; pass the metres per source unit (--unit-scale 0.001 for millimetres, 0.01 for centimetres)"
+#: The median object of a scene larger than this across (bounding-box diagonal, m) gets a warning: a scene's objects
+#: are cups, chairs and beds (2.5 m), and a reconstruction written in decimetres or centimetres passes the bounds
+#: checks with 4 m chairs (a REST3D ``dc`` result), which then settle as slowly as towers and clear a table top only
+#: by metres. Smaller than the lower bound (1 cm): a scene in kilometres or normalised to a unit box.
+PLAUSIBLE_MEDIAN_DIAGONAL = (0.01, 3.0)
 #: Mesh file suffixes read as objects.
 MESH_SUFFIXES = (".glb", ".gltf", ".ply", ".obj")
 #: A levelling that turns the scene farther than this (deg) from the given up axis gets a warning: the camera tilts of
@@ -328,7 +333,8 @@ def import_placed(objects: list[PlacedObject], out_dir: str | Path, params: Plac
 
 def check_placed(objects: list[PlacedObject], camera: Camera | None, out_dir: Path) -> None:
     """The checks of :func:`import_placed` that need no levelling, on objects and camera in metres (``InputError``
-    naming the file and the problem)."""
+    naming the file and the problem); a warning for a scene whose median object is implausibly large or small in
+    metres (:data:`PLAUSIBLE_MEDIAN_DIAGONAL`)."""
     from phiscene.meshes import check_mesh
 
     if not objects:
@@ -340,6 +346,11 @@ def check_placed(objects: list[PlacedObject], camera: Camera | None, out_dir: Pa
                              "[A-Za-z0-9_.-] of a name: rename one of them)")
         seen[o.id] = o.source
         check_mesh(o.mesh, o.source)
+    median = float(np.median([np.linalg.norm(o.mesh.extents) for o in objects]))
+    low, high = PLAUSIBLE_MEDIAN_DIAGONAL
+    if not low <= median <= high:
+        log.warning("%s: its median object is %.3g m across (%d objects, from %s): are the meshes in metres%s",
+                    out_dir, median, len(objects), objects[0].source.parent, UNIT_HINT)
     if camera is not None:
         eye, target = np.asarray(camera.eye, dtype=float), np.asarray(camera.target, dtype=float)
         if not (np.all(np.isfinite(eye)) and np.all(np.isfinite(target)) and np.linalg.norm(target - eye) > 0):
