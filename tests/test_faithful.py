@@ -248,6 +248,32 @@ def test_an_object_the_joint_release_toppled_is_grounded_again_on_its_supporter(
     np.testing.assert_allclose(poses["table"], TABLE, atol=1e-4)
 
 
+@pytest.mark.parametrize("extensions", [2, 0])
+def test_joint_settling_cut_off_while_an_object_falls_goes_on(work, monkeypatch, extensions):
+    # joint settling capped at 20 frames (1/3 s) releases a box 1 m above the table top: it has fallen
+    # g t^2 / 2 = 54.5 cm when the cap is reached, still falling; released on, it lands on the table top and the
+    # settling ends at rest there. Without the extensions it is left in mid-air
+    from phiscene.assembly import assemble
+
+    monkeypatch.setattr(assemble, "JOINT_EXTENSIONS", extensions)
+    pose = make_pose(translation=(0.1, -0.05, 0.1 + 0.05 + 1.0))
+    scene = scene_of(work, {"table": ("table", TABLE), "box": ("box", pose)})
+    fp = AssemblyParams.from_dict({"faithful": {"enabled": True, "joint_settle_frames": 20}})
+    objects = {"table": {}, "box": {"certificate": {"remedy": "none"}}}
+    poses = assemble._joint_settle(scene, convex_proxies(scene, work["cache"]), SIM, work["cache"], fp.faithful,
+                                   fp.settle_params, objects, {"table": np.zeros(3), "box": np.zeros(3)},
+                                   {"table": TABLE, "box": pose})
+    fallen = pose[2, 3] - poses["box"][2, 3]
+    if extensions == 0:
+        assert fallen == pytest.approx(0.5 * 9.81 * (20 / 60) ** 2, abs=0.01)
+        return
+    assert fallen == pytest.approx(1.0, abs=3e-3)  # on the table top
+    assert objects["box"]["joint_settle"][0] == pytest.approx(np.linalg.norm(poses["box"][:3, 3] - pose[:3, 3]),
+                                                              abs=1e-6)  # from where it was released first
+    assert objects["box"]["certificate"]["remedy"] == "none+joint"
+    np.testing.assert_allclose(poses["table"], TABLE, atol=1e-4)
+
+
 def test_regrounding_that_brings_the_scene_down_when_released_together_is_undone(work, monkeypatch):
     # the same toppled box, grounded again on the table (kept: closer to its input); this time the last joint
     # release of the scene knocks the table over (stood in for: the release reports it turned 90 deg). The
