@@ -16,7 +16,7 @@ import trimesh
 from scenes import ground_alone
 from simcheck import saved_and_released
 
-from phiscene.assembly.ballast import ballast_com
+from phiscene.assembly.ballast import ballast_com, hull_facets
 from phiscene.assembly.faithful import FaithfulParams
 from phiscene.inertia import rigid_props
 from phiscene.meshes import save_mesh
@@ -175,3 +175,19 @@ def test_a_ballast_keeps_the_orientation_of_the_photo_beyond_the_turn_bound(tmp_
     assert held["drift_trans"] < 1e-3 and held["drift_rot"] < 0.5  # MuJoCo, with the declared centre
     if on_a:
         assert uniform["drift_rot"] > 10.0  # a uniform solid, it falls off A (on B it balances: statics above)
+
+
+def test_hull_facets_hold_the_box_and_nothing_flat():
+    """The half-spaces of a box's vertices, doubled with near-duplicates (two pieces sharing a face): a point is
+    inside exactly when it is within the box's bounds; points in one plane hold no point off it."""
+    rng = np.random.default_rng(0)
+    box = trimesh.creation.box((0.4, 0.2, 0.1)).vertices
+    points = np.vstack([box, box + rng.normal(scale=1e-9, size=box.shape)])
+    facets = hull_facets(points)
+    probes = rng.uniform(-0.3, 0.3, size=(2000, 3))
+    inside = np.all(facets[:, :3] @ probes.T + facets[:, 3:] <= 1e-12, axis=0)
+    within = np.all(np.abs(probes) <= [0.2, 0.1, 0.05], axis=1)
+    assert np.array_equal(inside, within) and within.any() and not within.all()
+    flat = hull_facets(np.c_[rng.uniform(size=(50, 2)), np.zeros(50)])  # joggled: a sliver, or nothing
+    off = np.c_[rng.uniform(0.2, 0.8, size=(100, 2)), np.full(100, 0.001)]
+    assert flat is None or not np.any(np.all(flat[:, :3] @ off.T + flat[:, 3:] <= 1e-12, axis=0))
