@@ -124,6 +124,29 @@ def test_reference_levelling_is_the_kabsch_rotation(tmp_path):
     assert scene_ids(tmp_path) == ["s"]
 
 
+def test_another_methods_reconstruction_is_levelled_and_listed(tmp_path):
+    # a Gen3DSR result (the same layout, tilted 10 deg) of scene t, which has no SAM 3D Objects result: imported
+    # levelled within a degree of the tilt; listed for the variant gen3dsr, not for the real suites' sam3d + ours
+    from phiscene.io.rest3d import ALL_VARIANTS, Rest3dSource
+
+    write_scene(tmp_path, "s", (14.0, 0.0), variant="sam3d")
+    write_scene(tmp_path, "s", (0.0, 0.0), variant="ours")
+    write_scene(tmp_path, "t", (10.0, 0.0), variant="gen3dsr")
+    assert scene_ids(tmp_path) == ["s"] and scene_ids(tmp_path, "gen3dsr") == ["t"] and scene_ids(tmp_path, "sg") == []
+    scene = import_rest3d(tmp_path, "t", tmp_path / "out", "gen3dsr")
+    assert scene.meta["levelling"]["rotation_deg"] == pytest.approx(10.0, abs=1.0)
+    assert Rest3dSource.from_dict({"root": "r", "variant": "sg"}).variant == "sg"
+    with pytest.raises(ValueError, match="variant must be one of"):
+        Rest3dSource.from_dict({"root": "r", "variant": "midi"})
+    import argparse
+
+    from phiscene.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    variant = next(a for a in sub.choices["import-rest3d"]._actions if a.dest == "variant")
+    assert tuple(variant.choices) == ALL_VARIANTS
+
+
 def test_missing_data_names_the_path(tmp_path):
     with pytest.raises(InputError, match="REST3D data not found.*git clone --branch gh-pages"):
         read_rest3d(tmp_path / "nowhere", "custom_viga")

@@ -7,7 +7,7 @@
     phiscene import-sam3d IN_DIR OUT_DIR [--floor NX NY NZ D] [--unit-scale 1] [--no-walls]
     phiscene import-placed MESH_DIR OUT_DIR [--up y|z] [--placements P.json] [--unit-scale 1] [--no-level]
                            [--no-walls]
-    phiscene import-rest3d ROOT SCENE OUT_DIR [--variant sam3d|ours] [--no-level] [--no-walls]
+    phiscene import-rest3d ROOT SCENE OUT_DIR [--variant sam3d|ours|dc|gen3dsr|sg] [--no-level] [--no-walls]
     phiscene import-front3d ROOT OUT_DIR [--room SCENE_ID ...] [--test-rooms 1000] [--initial PATTERN]
     phiscene export SCENE_JSON OUT_DIR [--proxies P.npz] [--topology T.json] [--no-check] [--demo]
 
@@ -360,7 +360,9 @@ def build_parser() -> argparse.ArgumentParser:
     r3.add_argument("root", help="a clone of the REST3D gh-pages branch (holds assets/)")
     r3.add_argument("scene", help="scene folder name, e.g. custom_viga")
     r3.add_argument("out_dir")
-    r3.add_argument("--variant", choices=("sam3d", "ours"), default="sam3d")
+    r3.add_argument("--variant", choices=("sam3d", "ours", "dc", "gen3dsr", "sg"), default="sam3d",
+                    help="sam3d: raw SAM 3D Objects; ours: REST3D's result; dc, gen3dsr, sg: Digital Cousins', "
+                         "Gen3DSR's, SceneGen's reconstruction of the same photo (where the scene has it)")
     r3.add_argument("--no-level", action="store_true", help="trust the up convention (no gravity estimate)")
     r3.add_argument("--no-walls", action="store_true", help="estimate no walls from the panels hanging on them")
     r3.set_defaults(func=cmd_import_rest3d)

@@ -16,7 +16,7 @@ def scene_ids(suite):
     if "source" in s and s["source"]["kind"] == "rest3d":  # every scene of the REST3D checkout
         from phiscene.io.rest3d import scene_ids as _rest3d_scene_ids
 
-        return _rest3d_scene_ids(s["source"]["root"])
+        return _rest3d_scene_ids(s["source"]["root"], s["source"].get("variant", "sam3d"))
     if "source" in s and s["source"]["kind"] == "sam3d":  # every run in the source's folder
         from phiscene.io.sam3d import scene_ids as _sam3d_scene_ids
 

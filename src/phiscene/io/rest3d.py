@@ -9,8 +9,9 @@ here)::
                                                                               "quat": [[w, x, y, z], ...]}}}
 
 ``variant`` ``sam3d`` is the raw SAM 3D Objects output (its frame follows the camera: gravity is not levelled);
-``ours`` is REST3D's physically stabilised result on the same meshes, in its own levelled y-up frame. Frame 0
-of each track places the actor: ``world = R(quat) v + pos``.
+``ours`` is REST3D's physically stabilised result on the same meshes, in its own levelled y-up frame; ``dc``,
+``gen3dsr`` and ``sg`` are the results of Digital Cousins, Gen3DSR and SceneGen on the same photos
+(:data:`BASELINES`), in the same layout. Frame 0 of each track places the actor: ``world = R(quat) v + pos``.
 
 :func:`import_rest3d` imports one variant through :func:`phiscene.io.placed.import_placed` (``sam3d``: levelled
 by our estimate; ``ours``: y-up convention only, REST3D's own frame). :func:`reference_levelling` is REST3D's
@@ -39,8 +40,13 @@ from phiscene.io.placed import (
 from phiscene.params import Params
 from phiscene.scene import Scene
 
-#: Variants of a REST3D scene folder this module reads.
+#: The variants of a REST3D scene folder that the ``real`` suites pair: raw SAM 3D Objects and REST3D's result.
 VARIANTS = ("sam3d", "ours")
+#: The page's results of the other methods REST3D compares with, on the same photos (not every scene has each):
+#: reconstructions that are not SAM 3D Objects' (other meshes, other errors), to import and ground as inputs.
+BASELINES = {"dc": "Digital Cousins", "gen3dsr": "Gen3DSR", "sg": "SceneGen"}
+#: Every variant this module reads.
+ALL_VARIANTS = (*VARIANTS, *BASELINES)
 #: How a user gets the data (printed when it is missing).
 GET_DATA = "git clone --branch gh-pages https://github.com/ShirleyMaxx/REST3D <root>"
 
@@ -56,7 +62,8 @@ class Rest3dSource(Params):
     kind
         ``rest3d``.
     variant
-        Which result is the suite's initial scene: ``sam3d`` (raw SAM 3D Objects, levelled here) or ``ours``.
+        Which result is the suite's initial scene: ``sam3d`` (raw SAM 3D Objects, levelled here), ``ours``, or
+        another method's reconstruction (:data:`BASELINES`, levelled here).
     placed
         Import settings (:class:`phiscene.io.placed.PlacedParams`: up convention, levelling, image size).
     """
@@ -72,8 +79,8 @@ class Rest3dSource(Params):
         """Reject another kind or an unknown variant (``ValueError``)."""
         if self.kind != "rest3d":
             raise ValueError(f"REST3D source kind must be 'rest3d', got {self.kind!r}")
-        if self.variant not in VARIANTS:
-            raise ValueError(f"REST3D variant must be one of {VARIANTS}, got {self.variant!r}")
+        if self.variant not in ALL_VARIANTS:
+            raise ValueError(f"REST3D variant must be one of {ALL_VARIANTS}, got {self.variant!r}")
 
 
 def scene_dir(root: str | Path, scene: str, variant: str) -> Path:
@@ -144,11 +151,12 @@ def import_rest3d(root: str | Path, scene: str, out_dir: str | Path, variant: st
                   params: PlacedParams | None = None) -> Scene:
     """Import one REST3D scene variant as ``OUT_DIR/initial/scene.json`` (+ ``reference/camera.json``).
 
-    ``sam3d`` is levelled by our estimate (``params.level``); ``ours`` keeps REST3D's frame (y-up only).
+    ``sam3d`` and the other methods' reconstructions (:data:`BASELINES`) are levelled by our estimate
+    (``params.level``); ``ours`` keeps REST3D's frame (y-up only).
     """
     data = read_rest3d(root, scene, variant)
     params = params or PlacedParams()
-    if variant != "sam3d":
+    if variant == "ours":
         params = PlacedParams(**{**params.to_dict(), "level": False})
     source = {"kind": "rest3d", "root": str(root), "scene": scene, "variant": variant}
     return import_placed(data.objects, out_dir, params, data.camera, source)
@@ -190,10 +198,12 @@ def run_rest3d_scene(source: dict, scene: str, out_dir: str | Path) -> Scene:
     return import_rest3d(src.root, scene, out_dir, src.variant, src.placed)
 
 
-def scene_ids(root: str | Path) -> list[str]:
-    """Scenes of a REST3D checkout that have both a ``sam3d`` and an ``ours`` result."""
+def scene_ids(root: str | Path, variant: str = "sam3d") -> list[str]:
+    """Scenes of a REST3D checkout that have both a ``sam3d`` and an ``ours`` result (``variant`` ``sam3d`` or
+    ``ours``), or a result of ``variant``, another method's (:data:`BASELINES`)."""
     assets = Path(root) / "assets"
     if not assets.is_dir():
         raise InputError(root, None, f"REST3D data not found (no assets/ folder); get it with `{GET_DATA}`")
+    needed = VARIANTS if variant in VARIANTS else (variant,)
     return sorted(p.name for p in assets.iterdir()
-                  if all((p / v / "simulation.json").is_file() for v in VARIANTS))
+                  if all((p / v / "simulation.json").is_file() for v in needed))
