@@ -188,3 +188,39 @@ def test_bad_input_is_named(tmp_path):
     with pytest.raises(ValueError, match="cone"):
         pm.MujocoParams.from_dict({"cone": "round"})
     assert pm.MujocoParams.from_dict({"solimp": [0.9, 0.95, 0.001, 0.5, 2]}).solimp == (0.9, 0.95, 0.001, 0.5, 2.0)
+
+
+def test_a_release_that_overflows_the_arena_runs_again_with_a_larger_one(tmp_path, monkeypatch):
+    """Two boxes through each other, each a compound of 30 small cubes (a reconstruction's objects inside one
+    another): their contacts overflow the arena MuJoCo sizes for the model. The drift is that of the same release
+    with an ample arena (256 MB) from the start, to the bit; without the retries the overflow is an error."""
+    import phiscene.metrics.drift as drift_mod
+    from phiscene.metrics.drift import ground_below
+    from phiscene.proxies import Proxy
+    from tests.scenes import box_scene
+
+    cube = trimesh.creation.box((0.3, 0.3, 0.3))
+    cube.export(tmp_path / "a.obj")
+    scene = box_scene({"a": tmp_path / "a.obj"}, {"a": ("a", make_pose(translation=(0, 0, 0.15))),
+                                                  "b": ("a", make_pose(translation=(0.02, 0.01, 0.16)))})
+    rng = np.random.default_rng(0)
+    pieces = {k: [trimesh.creation.box((0.06, 0.06, 0.06)).vertices + rng.uniform(-0.12, 0.12, 3) for _ in range(30)]
+              for k in ("a", "b")}
+    proxies = {k: Proxy(v, 1.0, 0.0) for k, v in pieces.items()}
+    got = drift_mujoco(scene, proxies, PROTOCOL, SIM)
+    lifted = scene.with_poses({o.id: make_pose(translation=[0, 0, PROTOCOL.upward_offset]) @ o.pose
+                               for o in scene.objects})
+    spec = pm.build_spec(lifted, proxies, SIM, ground_below(scene, proxies))
+    spec.memory = 256 * 2**20
+    model = pm.compile_model(spec, SIM)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    start = pm.body_poses(model, data, scene.ids)
+    pm.step_frames(model, data, PROTOCOL.frames, SIM)
+    end = pm.body_poses(model, data, scene.ids)
+    for k in scene.ids:
+        com0 = start[k][:3, 3] - [0.0, 0.0, PROTOCOL.upward_offset]
+        assert got["objects"][k]["drift_trans"] == float(np.linalg.norm(end[k][:3, 3] - com0))
+    monkeypatch.setattr(drift_mod, "MUJOCO_ARENA_RETRIES", 0)
+    with pytest.raises((pm.ArenaFull, mujoco.FatalError)):
+        drift_mujoco(scene, proxies, PROTOCOL, SIM)

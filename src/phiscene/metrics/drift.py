@@ -18,6 +18,7 @@ metrics; :mod:`phiscene.sim` only builds and steps the worlds.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,6 +36,8 @@ if TYPE_CHECKING:
     from phiscene.proxies import Proxy
     from phiscene.scene import Scene
     from phiscene.sim.mujoco import MujocoParams
+
+log = logging.getLogger(__name__)
 
 #: Per-object and mean keys every drift result holds.
 DRIFT_KEYS = ("drift_trans", "drift_rot")
@@ -185,6 +188,13 @@ def free_means(per: dict[str, dict], keys: tuple[str, ...]) -> dict[str, float]:
 
 
 # -- MuJoCo -------------------------------------------------------------------
+#: :func:`drift_mujoco`: a release whose contacts overflow the arena MuJoCo sized for the model (a reconstruction's
+#: objects through one another: 343 contacts, 2058 constraint rows) runs again from the start with an arena this many
+#: times larger, at most this many times (the release itself does not depend on the arena's size).
+MUJOCO_ARENA_GROWTH = 4
+MUJOCO_ARENA_RETRIES = 3
+
+
 def drift_mujoco(scene: "Scene", proxies: dict[str, "Proxy"], params: DriftParams, sim: SimSettings,
                  mj: MujocoParams | None = None) -> dict:
     """Post-simulation drift of a scene in MuJoCo (same protocol as the pybullet drift).
@@ -212,7 +222,7 @@ def drift_mujoco(scene: "Scene", proxies: dict[str, "Proxy"], params: DriftParam
     import mujoco
 
     from phiscene.proxies import with_bases
-    from phiscene.sim.mujoco import body_poses, build_spec, compile_model, step_frames
+    from phiscene.sim.mujoco import ArenaFull, body_poses, build_spec, compile_model, step_frames
 
     offset = float(params.upward_offset)
     frames = int(params.frames)
@@ -225,11 +235,21 @@ def drift_mujoco(scene: "Scene", proxies: dict[str, "Proxy"], params: DriftParam
     proxies = with_bases(scene, proxies)  # completed bases: pieces of the collision shapes
     floor = ground_below(scene, proxies)
     spec = build_spec(lifted, proxies, sim, floor, mj)
-    model = compile_model(spec, sim)
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    start = body_poses(model, data, scene.ids)
-    step_frames(model, data, frames, sim)
+    for attempt in range(MUJOCO_ARENA_RETRIES + 1):
+        model = compile_model(spec, sim)
+        data = mujoco.MjData(model)
+        try:
+            mujoco.mj_forward(model, data)
+            start = body_poses(model, data, scene.ids)
+            step_frames(model, data, frames, sim)
+            break
+        except (mujoco.FatalError, ArenaFull) as exc:  # the arena MuJoCo sized for the model holds too few contacts
+            full = isinstance(exc, ArenaFull) or "out of memory" in str(exc)
+            if not full or attempt == MUJOCO_ARENA_RETRIES:
+                raise
+            spec.memory = MUJOCO_ARENA_GROWTH * int(model.narena)
+            log.info("MuJoCo drift of %s: its contacts overflow the arena (%s); again with %d MB", scene.source,
+                     " ".join(str(exc).split())[:80], spec.memory // 2**20)
     end = body_poses(model, data, scene.ids)
     objects = {}
     for o in scene.objects:

@@ -367,14 +367,25 @@ _FATAL_WARNINGS = {
 }
 
 
+#: Of those, the ones that say the arena (``<size memory>``, ``MjSpec.memory``) was too small: :class:`ArenaFull`.
+_ARENA_WARNINGS = ("mjWARN_CONTACTFULL", "mjWARN_CNSTRFULL")
+
+
+class ArenaFull(RuntimeError):
+    """MuJoCo's arena held too few contacts or constraints for the scene (they were dropped, or its stack
+    overflowed): the same simulation with a larger ``MjSpec.memory`` is valid."""
+
+
 def check_warnings(data: "mujoco.MjData") -> None:
-    """Raise ``RuntimeError`` if MuJoCo flagged a warning that invalidates the result."""
+    """Raise ``RuntimeError`` if MuJoCo flagged a warning that invalidates the result (:class:`ArenaFull` for
+    contacts or constraints dropped)."""
     import mujoco
 
     for name, why in _FATAL_WARNINGS.items():
         w = data.warning[int(getattr(mujoco.mjtWarning, name))]
         if w.number > 0:
-            raise RuntimeError(f"MuJoCo: {why} ({name} x{w.number}, first at step info {w.lastinfo})")
+            kind = ArenaFull if name in _ARENA_WARNINGS else RuntimeError
+            raise kind(f"MuJoCo: {why} ({name} x{w.number}, first at step info {w.lastinfo})")
 
 
 def body_poses(model: "mujoco.MjModel", data: "mujoco.MjData", names: list[str]) -> dict[str, np.ndarray]:
