@@ -199,6 +199,7 @@ def test_a_release_that_overflows_the_arena_runs_again_with_a_larger_one(tmp_pat
     from phiscene.proxies import Proxy
     from tests.scenes import box_scene
 
+    monkeypatch.chdir(tmp_path)  # MuJoCo's warnings go to the log, not to a MUJOCO_LOG.TXT written here
     cube = trimesh.creation.box((0.3, 0.3, 0.3))
     cube.export(tmp_path / "a.obj")
     scene = box_scene({"a": tmp_path / "a.obj"}, {"a": ("a", make_pose(translation=(0, 0, 0.15))),
@@ -224,3 +225,4 @@ def test_a_release_that_overflows_the_arena_runs_again_with_a_larger_one(tmp_pat
     monkeypatch.setattr(drift_mod, "MUJOCO_ARENA_RETRIES", 0)
     with pytest.raises((pm.ArenaFull, mujoco.FatalError)):
         drift_mujoco(scene, proxies, PROTOCOL, SIM)
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()

@@ -58,6 +58,7 @@ Contacts (see :class:`MujocoParams`)
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -72,6 +73,8 @@ from phiscene.params import Params
 from phiscene.sim.settings import SimSettings
 from phiscene.tolerances import GRAVITY
 from phiscene.transforms import decompose, make_pose, matrix_to_quat_wxyz
+
+log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:  # heavy import only for type checkers
     import mujoco
@@ -319,6 +322,19 @@ def build_spec(scene: "Scene", proxies: dict[str, "Proxy"], sim: SimSettings, gr
     return spec
 
 
+def _log_warning(message: str) -> None:
+    log.warning("MuJoCo: %s", " ".join(str(message).split()))
+
+
+def route_warnings() -> None:
+    """Send MuJoCo's own warnings (an arena too small, :class:`ArenaFull`) to the ``phiscene.sim.mujoco`` logger
+    (the job's log) instead of stderr and a ``MUJOCO_LOG.TXT`` written into the working directory."""
+    import mujoco
+
+    if mujoco.get_mju_user_warning() is not _log_warning:
+        mujoco.set_mju_user_warning(_log_warning)
+
+
 def compile_model(spec: "mujoco.MjSpec", sim: SimSettings) -> "mujoco.MjModel":
     """Compile ``spec`` and set Bullet-equivalent damping on every free joint's six DOFs.
 
@@ -328,6 +344,7 @@ def compile_model(spec: "mujoco.MjSpec", sim: SimSettings) -> "mujoco.MjModel":
     """
     import mujoco
 
+    route_warnings()
     try:
         model = spec.compile()
     except ValueError as exc:  # MuJoCo names the offending element, e.g. mesh '<id>/hull<k>'
