@@ -598,9 +598,9 @@ def _joint_settle(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, cac
     at rest do not move, the others find the rest their neighbours allow. Cut off at ``joint_settle_frames`` with
     an object still moving farther over the settling window than ``joint_tol`` / ``joint_tol_deg`` (falling, not
     rocking in place), the scene is released on, up to :data:`JOINT_EXTENSIONS` more times. Each moved object's
-    record gets
-    ``joint_settle`` ([m, deg]) and its displacement and rotation change from ``inputs`` (id -> input pose
-    (4, 4)) are updated, certificate included (its centre-of-mass displacement with ``coms``: id -> (3,) local).
+    record gets ``joint_settle`` ([m, deg]) and its displacement and rotation change from ``inputs`` (id -> input
+    pose (4, 4)) are updated, certificate included (its centre-of-mass displacement with ``coms``: id -> (3,)
+    local).
     """
     from phiscene.baselines.joint_sim import JointSimParams, joint_sim
 
