@@ -223,19 +223,26 @@ def test_block_tipping_off_an_edge_without_going_far_is_shifted_back_flat(work, 
     assert t[0] < 0.05 and np.linalg.norm(t[:2] - pose[:2, 3]) <= max_shift + 1e-6
 
 
+def toppled_box(work):
+    """A box put on the table 2 mm above its top, that releasing the whole scene left on its side on the floor
+    beside the table (its record says so): its input pose, the scene, graph, faithful params, the toppled pose and
+    the records."""
+    pose = make_pose(translation=(0.1, -0.05, 0.1 + 0.05 + 0.002))
+    scene = scene_of(work, {"table": ("table", TABLE), "box": ("box", pose)})
+    g = graph_of(scene, [("ground", "table", "supports"), ("table", "box", "supports")])
+    toppled = make_pose(Rotation.from_euler("y", 90, degrees=True).as_matrix(), (0.5, -0.05, 0.05))
+    objects = {"table": {"joint_settle": [0.0, 0.0]},
+               "box": {"joint_settle": [0.4, 90.0], "certificate": {"remedy": "none", "touching": ["ground"]}}}
+    return pose, scene, g, AssemblyParams.from_dict(FAITHFUL), toppled, objects
+
+
 def test_an_object_the_joint_release_toppled_is_grounded_again_on_its_supporter(work):
     # the box stood on the table; releasing the whole scene left it on its side on the floor beside the table (its
     # record says so). Grounded again from its input on the table as it rests, it stands flush on the table top
     # within 1 cm of where it was put, and that pose replaces the toppled one
     from phiscene.assembly.assemble import _collapsed, _reground_collapsed
 
-    pose = make_pose(translation=(0.1, -0.05, 0.1 + 0.05 + 0.002))
-    scene = scene_of(work, {"table": ("table", TABLE), "box": ("box", pose)})
-    g = graph_of(scene, [("ground", "table", "supports"), ("table", "box", "supports")])
-    params = AssemblyParams.from_dict(FAITHFUL)
-    toppled = make_pose(Rotation.from_euler("y", 90, degrees=True).as_matrix(), (0.5, -0.05, 0.05))
-    objects = {"table": {"joint_settle": [0.0, 0.0]},
-               "box": {"joint_settle": [0.4, 90.0], "certificate": {"remedy": "none", "touching": ["ground"]}}}
+    pose, scene, g, params, toppled, objects = toppled_box(work)
     assert _collapsed(objects["box"], params.faithful) and not _collapsed(objects["table"], params.faithful)
     poses = _reground_collapsed(scene, g.order, convex_proxies(scene, work["cache"]), params, SIM, work["cache"], g,
                                 {}, {"table": TABLE, "box": toppled}, objects,
@@ -283,13 +290,7 @@ def test_regrounding_that_brings_the_scene_down_when_released_together_is_undone
 
     from phiscene.assembly import assemble
 
-    pose = make_pose(translation=(0.1, -0.05, 0.1 + 0.05 + 0.002))
-    scene = scene_of(work, {"table": ("table", TABLE), "box": ("box", pose)})
-    g = graph_of(scene, [("ground", "table", "supports"), ("table", "box", "supports")])
-    params = AssemblyParams.from_dict(FAITHFUL)
-    toppled = make_pose(Rotation.from_euler("y", 90, degrees=True).as_matrix(), (0.5, -0.05, 0.05))
-    objects = {"table": {"joint_settle": [0.0, 0.0]},
-               "box": {"joint_settle": [0.4, 90.0], "certificate": {"remedy": "none", "touching": ["ground"]}}}
+    pose, scene, g, params, toppled, objects = toppled_box(work)
     first = {"table": TABLE, "box": toppled}
     masses, bases = {"table": np.array([0.0, 0.0, 0.01])}, {}
     before = copy.deepcopy((objects, masses, bases))

@@ -672,10 +672,13 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
     from phiscene.sim.bullet import BulletWorld
 
     fp, pp = params.faithful, params.penetration_params
+    collapsed = [o for o in order if o not in attached and _collapsed(objects[o], fp)]
+    if not collapsed:
+        return poses
     kept = []
     # the first joint settling's rest, to go back to if releasing the regrounded scene brings it down
     before, saved = dict(poses), copy.deepcopy((objects, masses, bases))
-    for oid in [o for o in order if o not in attached and _collapsed(objects[o], fp)]:
+    for oid in collapsed:
         obj = scene.get(oid)
         initial = np.asarray(obj.pose, dtype=float)
         context = {q: poses[q] for q in order if q != oid}

@@ -432,6 +432,7 @@ _SOLVERS = {**OPTIMIZERS, "steepest_joint": SteepestJointState}
 #: out to this many doublings of it (0.6 m -> 4.8 m), each with a doubled step (as many probes per doubling).
 SEARCH_DOUBLINGS = 3
 
+
 def resolve_penetration(active: SdfBody, context: list[SdfBody], ground_height: float | None,
                         params: PenetrationParams, planes=(), planar: bool = False,
                         yaw_only: bool = False) -> tuple[np.ndarray, dict]:

@@ -13,10 +13,10 @@ here)::
 ``gen3dsr`` and ``sg`` are the results of Digital Cousins, Gen3DSR and SceneGen on the same photos
 (:data:`BASELINES`), in the same layout. Frame 0 of each track places the actor: ``world = R(quat) v + pos``.
 
-:func:`import_rest3d` imports one variant through :func:`phiscene.io.placed.import_placed` (``sam3d``: levelled
-by our estimate; ``ours``: y-up convention only, REST3D's own frame). :func:`reference_levelling` is REST3D's
-levelling of a scene as the issue defines it: the Kabsch rotation between the object centres of ``sam3d/`` and
-``ours/`` (itself an estimate: REST3D also moves objects when it places them).
+:func:`import_rest3d` imports one variant through :func:`phiscene.io.placed.import_placed` (``sam3d`` and the
+other methods': levelled by our estimate; ``ours``: y-up convention only, REST3D's own frame).
+:func:`reference_levelling` is REST3D's levelling of a scene as the issue defines it: the Kabsch rotation between
+the object centres of ``sam3d/`` and ``ours/`` (itself an estimate: REST3D also moves objects when it places them).
 """
 
 from __future__ import annotations
