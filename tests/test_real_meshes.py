@@ -245,3 +245,22 @@ def test_a_decomposition_that_fills_the_space_under_a_table_is_redone_with_more_
     # no second cap larger than the first: no second decomposition
     assert "refined" not in proxy_for_mesh(path, ProxyParams(**{**light, "refine_max_hulls": 2}),
                                            tmp_path / "cache").meta
+
+
+def test_a_textured_glb_loads_the_geometry_trimesh_reads_with_its_materials(tmp_path):
+    # load_mesh skips decoding textures; the oracle is trimesh's own load of the same file with them
+    from PIL import Image
+
+    from phiscene.meshes import load_mesh
+
+    mesh = open_dense(trimesh.creation.icosphere(subdivisions=2, radius=0.1), 6000)
+    uv = np.random.default_rng(0).random((len(mesh.vertices), 2))
+    image = Image.fromarray(np.random.default_rng(1).integers(0, 255, (64, 64, 3), dtype=np.uint8))
+    mesh.visual = trimesh.visual.TextureVisuals(uv=uv, image=image)
+    path = tmp_path / "textured.glb"
+    mesh.export(path)
+    full = trimesh.load(path, force="mesh", process=False)
+    assert isinstance(full.visual, trimesh.visual.TextureVisuals) and full.visual.material.baseColorTexture is not None
+    loaded = load_mesh(path)
+    np.testing.assert_array_equal(loaded.vertices, full.vertices)
+    np.testing.assert_array_equal(loaded.faces, full.faces)

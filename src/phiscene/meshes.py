@@ -21,7 +21,8 @@ from phiscene.tolerances import TOL
 def load_mesh(path: str | Path) -> trimesh.Trimesh:
     """Load a mesh file as one checked :class:`trimesh.Trimesh` (cached per file version).
 
-    The returned mesh is shared between callers: copy it before changing it.
+    The returned mesh is shared between callers: copy it before changing it. It carries no materials or textures
+    (geometry only).
 
     Raises
     ------
@@ -41,7 +42,8 @@ def _load_cached(path: str, mtime_ns: int, size: int) -> trimesh.Trimesh:
     if size == 0:
         raise InputError(path, None, "mesh file is empty (0 bytes)")
     try:
-        loaded = trimesh.load(path, force="mesh", process=False)
+        # textures are never read from a loaded mesh: not decoding them makes loading a textured GLB 5 times faster
+        loaded = trimesh.load(path, force="mesh", process=False, skip_materials=True)
     except Exception as exc:  # trimesh raises many types for corrupt files
         raise InputError(path, None, f"cannot read mesh ({type(exc).__name__}: {str(exc)[:120]})") from None
     if isinstance(loaded, trimesh.Scene):  # force='mesh' on an empty scene
