@@ -35,15 +35,12 @@ floor-standing objects least in total.
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 
 import numpy as np
 import trimesh
 
 from phiscene.params import Params
-
-log = logging.getLogger(__name__)
 
 #: Up axis conventions of source files -> the rotation that makes them z-up.
 UP_AXES = ("y", "z")
@@ -319,10 +316,6 @@ def rotation_between(a, b) -> np.ndarray:
     return Rotation.from_rotvec(axis / s * np.arctan2(s, c)).as_matrix()
 
 
-#: Standing objects that must agree on a floor (bottoms within ``floor_band``) above a lone lowest object reaching
-#: higher than them for that object to be taken for a misplaced mesh (:func:`floor_height`).
-LONE_FLOOR_COMPANY = 3
-
 #: Share of an object's footprint another object must cover to count as beneath it (:func:`floor_height`).
 BENEATH_SHARE = 0.25
 #: Vertex cap of the hull whose resting facets place a standing object's bottom (:func:`resting_bottom`; the
@@ -375,16 +368,14 @@ def resting_bottom(points: np.ndarray, max_angle_deg: float) -> float:
     return float((np.asarray(hull.vertices) @ turned[:3, :3].T + turned[:3, 3])[:, 2].min())
 
 
-def floor_height(parts: list[np.ndarray], band: float, rest_deg: float = 0.0, names: list[str] | None = None) -> float:
+def floor_height(parts: list[np.ndarray], band: float, rest_deg: float = 0.0) -> float:
     """Height of the ground under a levelled scene (z up): where the objects standing on it stand.
 
     An object stands on the ground unless another one is beneath it: covering at least ``BENEATH_SHARE`` of its
     bounding-box footprint with a top below its mid-height (a book on a table; a chair tucked under a table
     is not on it). Its bottom is where it would rest (:func:`resting_bottom`, within ``rest_deg``; 0 = its lowest
     point). Of those, the ones whose bottoms lie within ``band`` of the lowest bottom are taken (a poster
-    on a wall has nothing beneath it either), and the ground is the median of their bottoms. A lowest object alone
-    in its band that reaches above where several others agree on a floor is a misplaced mesh, not the floor's
-    witness, and is left out (:func:`_spans_a_floor`; logged as a warning).
+    on a wall has nothing beneath it either), and the ground is the median of their bottoms.
 
     Parameters
     ----------
@@ -394,8 +385,6 @@ def floor_height(parts: list[np.ndarray], band: float, rest_deg: float = 0.0, na
         Height band above the lowest standing object (m); 0 = the lowest point of the scene.
     rest_deg
         Largest turn onto a resting facet (deg; :attr:`LevelParams.floor_rest_deg`).
-    names
-        The objects' names, for the warning (default: their indices).
 
     Returns
     -------
@@ -416,49 +405,12 @@ def floor_height(parts: list[np.ndarray], band: float, rest_deg: float = 0.0, na
         beneath = (overlap >= BENEATH_SHARE * area[i]) & (hi[:, 2] < mid[i])
         beneath[i] = False
         standing.append(not beneath.any())
-    idx = [i for i in range(len(parts)) if standing[i]]
-    bottoms = np.array([resting_bottom(parts[i], rest_deg) for i in idx])
-    keep = np.ones(len(idx), dtype=bool)
-    while True:
-        low = int(np.flatnonzero(keep)[np.argmin(bottoms[keep])])
-        if not _spans_a_floor(low, [parts[i] for i in idx], bottoms, keep, hi[idx, 2], band):
-            break
-        log.warning("the ground: object %s (its bottom %.2f m below the next standing object's, its "
-                    "top above where at least %d others stand) is taken for a misplaced mesh, not for what stands on "
-                    "the floor",
-                    names[idx[low]] if names else idx[low], float(np.sort(bottoms[keep])[1] - bottoms[low]),
-                    LONE_FLOOR_COMPANY)
-        keep[low] = False
-    b = bottoms[keep]
-    return float(np.median(b[b <= b.min() + band]))
-
-
-def _spans_a_floor(low: int, parts: list[np.ndarray], bottoms: np.ndarray, keep: np.ndarray, tops: np.ndarray,
-                   band: float) -> bool:
-    """Whether the lowest standing object ``low`` is a misplaced mesh rather than what stands on the floor.
-
-    It is when it is alone within ``band`` of its bottom, while at least :data:`LONE_FLOOR_COMPANY` other standing
-    objects that are not thin panels (what hangs on walls) have their bottoms within ``band`` of each other, higher
-    up and below its top: a floor that several objects agree on, inside the height of one object reaching far
-    below them (a 3D reconstruction's carpet or desk mesh 1-2.5 m deep, seen on Gen3DSR output). A lone lowest
-    object no taller than that is what stands on the floor, however many stand higher.
-    """
-    from phiscene.topology.attached import AttachedParams, panel_normal
-
-    others = [j for j in np.flatnonzero(keep) if j != low]
-    if any(bottoms[j] <= bottoms[low] + band for j in others):
-        return False
-    above = [j for j in others if bottoms[j] < tops[low]]
-    if len(above) < LONE_FLOOR_COMPANY:
-        return False
-    thin = AttachedParams().thin_ratio
-    above = [j for j in above if panel_normal(trimesh.PointCloud(parts[j]).convex_hull, thin) is None]
-    b = np.sort(bottoms[above])
-    return any(np.searchsorted(b, v + band, side="right") - k >= LONE_FLOOR_COMPANY for k, v in enumerate(b))
+    bottoms = np.array([resting_bottom(parts[i], rest_deg) for i in range(len(parts)) if standing[i]])
+    return float(np.median(bottoms[bottoms <= bottoms.min() + band]))
 
 
 def levelling_transform(parts: list[np.ndarray], up, forward=None, floor_band: float = 0.0,
-                        floor_rest_deg: float = 0.0, names: list[str] | None = None) -> np.ndarray:
+                        floor_rest_deg: float = 0.0) -> np.ndarray:
     """The rigid transform (4, 4) that levels a scene: ``up`` -> +z, ``forward`` -> +y, the ground at z = 0.
 
     Parameters
@@ -474,8 +426,6 @@ def levelling_transform(parts: list[np.ndarray], up, forward=None, floor_band: f
         :func:`floor_height`'s band (m); 0 = the lowest point on the ground.
     floor_rest_deg
         :func:`floor_height`'s largest turn onto a resting facet (deg; 0 = the objects as they came).
-    names
-        The objects' names (:func:`floor_height`'s warning).
     """
     R = rotation_between(up, [0.0, 0.0, 1.0])
     if forward is not None:
@@ -486,5 +436,5 @@ def levelling_transform(parts: list[np.ndarray], up, forward=None, floor_band: f
             R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ R
     T = np.eye(4)
     T[:3, :3] = R
-    T[2, 3] = -floor_height([np.asarray(p, dtype=float) @ R.T for p in parts], floor_band, floor_rest_deg, names)
+    T[2, 3] = -floor_height([np.asarray(p, dtype=float) @ R.T for p in parts], floor_band, floor_rest_deg)
     return T

@@ -275,7 +275,7 @@ def level_objects(objects: list[PlacedObject], params: PlacedParams, camera: Cam
     forward = None if camera is None else A @ (np.asarray(camera.target, float) - np.asarray(camera.eye, float))
     parts = [np.asarray(m.vertices) for m in meshes.values()]
     T = levelling_transform(parts, up, forward, params.levelling.floor_band,
-                             params.levelling.floor_rest_deg, list(meshes)) @ _h(A)
+                             params.levelling.floor_rest_deg) @ _h(A)
     return Levelling(T, estimate)
 
 
