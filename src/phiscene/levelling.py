@@ -20,6 +20,8 @@ the current estimate until it stops changing (mean shift), started from the mean
 the mode whose cone holds the most votes wins (then the most weight). A fruit, a tilted book or a mis-rotated object
 is outvoted by the table top and the furniture, and one large leaning board does not outweigh the objects that
 agree with each other. Its spread (weighted RMS angle of the inliers) is reported as a confidence measure.
+A camera looking steeply down (more than about 40 degrees) puts the scene's up outside the prior's cone; when fewer
+than :data:`MIN_AGREEMENT` votes agree, the estimate is made again from priors :data:`STEEP_PRIOR_DEG` steeper.
 
 :func:`levelling_transform` turns the estimate into a rigid transform: the minimal rotation taking up to +z,
 preceded by the up-axis convention of the source (y-up files become z-up), a rotation about z that makes the
@@ -35,12 +37,24 @@ floor-standing objects least in total.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
 import trimesh
 
 from phiscene.params import Params
+
+log = logging.getLogger(__name__)
+
+#: Fewer votes than this agreeing on the up estimate in the camera's cone: steeper priors are tried
+#: (:func:`estimate_up`).
+MIN_AGREEMENT = 3
+
+#: How far (deg) those steeper priors are turned from the camera's up. With the cone's ``max_tilt_deg`` (40),
+#: scenes tilted up to about 70 degrees are in reach, while a wall's normal, 90 degrees from up, stays 20 degrees
+#: outside the cone of a prior turned towards it from a level camera.
+STEEP_PRIOR_DEG = 30.0
 
 #: Up axis conventions of source files -> the rotation that makes them z-up.
 UP_AXES = ("y", "z")
@@ -132,17 +146,24 @@ class UpEstimate:
     votes
         Per object id: ``{"kind": "plane" | "box", "up": [3], "area": a, "weight": w, "inlier": bool}`` (``area``:
         the planar region's area, or the box's area scale, m^2).
+    steep_prior : (3,) float or None
+        The steeper prior the votes were cast in, when the camera's up gave too few agreeing votes
+        (:func:`estimate_up`); ``None``: the camera's up.
     """
 
     up: np.ndarray
     tilt_deg: float
     spread_deg: float
     votes: dict
+    steep_prior: np.ndarray | None = None
 
     def to_dict(self) -> dict:
         """JSON form (``import.json``)."""
-        return {"up": [float(v) for v in self.up], "tilt_deg": float(self.tilt_deg),
-                "spread_deg": float(self.spread_deg), "votes": self.votes}
+        out = {"up": [float(v) for v in self.up], "tilt_deg": float(self.tilt_deg),
+               "spread_deg": float(self.spread_deg), "votes": self.votes}
+        if self.steep_prior is not None:
+            out["steep_prior"] = [float(v) for v in self.steep_prior]
+        return out
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -222,6 +243,12 @@ def object_votes(meshes: dict[str, trimesh.Trimesh], prior: np.ndarray, params: 
 def estimate_up(meshes: dict[str, trimesh.Trimesh], prior, params: LevelParams = LevelParams()) -> UpEstimate:
     """Up direction of a scene from its objects' votes (module docstring).
 
+    When fewer than :data:`MIN_AGREEMENT` votes agree on the estimate (the scene's up may lie outside the prior's
+    cone: a camera looking steeply down), the estimate is made again with the prior turned by
+    :data:`STEEP_PRIOR_DEG` towards each of four directions at right angles, and the one on which the most votes
+    agree (then the most weight), at least :data:`MIN_AGREEMENT` and more than the first, is taken
+    (:attr:`UpEstimate.steep_prior` records its prior).
+
     Parameters
     ----------
     meshes
@@ -234,6 +261,36 @@ def estimate_up(meshes: dict[str, trimesh.Trimesh], prior, params: LevelParams =
     The estimate; the prior itself (spread 0) when no object votes.
     """
     prior = _unit(prior)
+    best = _estimate(meshes, prior, params)
+    score = _agreement(best)
+    if score[0] >= MIN_AGREEMENT:
+        return best
+    first = score[0]
+    a = _unit(np.cross(prior, [1.0, 0.0, 0.0] if abs(prior[0]) < 0.9 else [0.0, 1.0, 0.0]))
+    b = np.cross(prior, a)
+    c, s = np.cos(np.radians(STEEP_PRIOR_DEG)), np.sin(np.radians(STEEP_PRIOR_DEG))
+    for side in (a, -a, b, -b):
+        steep = _unit(c * prior + s * side)
+        estimate = _estimate(meshes, steep, params)
+        agree = _agreement(estimate)
+        if agree[0] >= MIN_AGREEMENT and agree > score:
+            best, score = UpEstimate(estimate.up, angle_deg(estimate.up, prior), estimate.spread_deg,
+                                     estimate.votes, steep), agree
+    if best.steep_prior is not None:
+        log.info("up: %d votes agree within %g deg of the camera's up, %d of a prior %g deg steeper: levelled by "
+                 "%.1f deg", first, params.max_tilt_deg, score[0],
+                 STEEP_PRIOR_DEG, best.tilt_deg)
+    return best
+
+
+def _agreement(estimate: UpEstimate) -> tuple[int, float]:
+    """How many votes agree on an estimate (its inliers), and their weight."""
+    inliers = [v for v in estimate.votes.values() if v["inlier"]]
+    return len(inliers), float(sum(v["weight"] for v in inliers))
+
+
+def _estimate(meshes: dict[str, trimesh.Trimesh], prior: np.ndarray, params: LevelParams) -> UpEstimate:
+    """:func:`estimate_up` with one prior (unit (3,)): the densest mode of the votes in its cone."""
     votes = object_votes(meshes, prior, params)
     if not votes:
         return UpEstimate(prior, 0.0, 0.0, {})

@@ -56,7 +56,8 @@ PLAUSIBLE_MEDIAN_DIAGONAL = (0.01, 3.0)
 MESH_SUFFIXES = (".glb", ".gltf", ".ply", ".obj")
 #: A levelling that turns the scene farther than this (deg) from the given up axis gets a warning: the camera tilts of
 #: the 9 real SAM 3D Objects scenes measure 2.5 to 29 deg (``benchmarks/levelling.py``), while files whose up axis is
-#: not the one given (``--up z`` on y-up files) level onto whatever lies within ``max_tilt_deg`` of it.
+#: not the one given (``--up z`` on y-up files) level onto whatever lies within reach of it (``max_tilt_deg``, and
+#: :data:`phiscene.levelling.STEEP_PRIOR_DEG` more when few votes agree).
 LARGE_TILT_DEG = 33.0
 
 
@@ -269,9 +270,9 @@ def level_objects(objects: list[PlacedObject], params: PlacedParams, camera: Cam
     estimate = estimate_up(meshes, [0.0, 0.0, 1.0], params.levelling) if params.level else None
     up = estimate.up if estimate is not None else np.array([0.0, 0.0, 1.0])
     if estimate is not None and estimate.tilt_deg > LARGE_TILT_DEG:
-        log.warning("levelled by %.1f deg from the given up axis %r, more than a camera tilts a real scene (up to "
-                    "about 30 deg): if the files' up axis is another one, give it (--up)", estimate.tilt_deg,
-                    params.up)
+        log.warning("levelled by %.1f deg from the given up axis %r, more than a camera at eye level tilts a real "
+                    "scene (up to about 30 deg): a camera looking steeply down, or files whose up axis is another one "
+                    "(then give it: --up)", estimate.tilt_deg, params.up)
     forward = None if camera is None else A @ (np.asarray(camera.target, float) - np.asarray(camera.eye, float))
     parts = [np.asarray(m.vertices) for m in meshes.values()]
     T = levelling_transform(parts, up, forward, params.levelling.floor_band,
