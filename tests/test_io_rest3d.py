@@ -334,7 +334,7 @@ def test_a_refused_import_writes_nothing_and_keeps_the_last_one(tmp_path):
 
 
 @pytest.mark.parametrize("tilt", [(50.0, 0.0), (-45.0, 20.0), (0.0, -50.0), (48.0, 8.0)])
-def test_a_steeply_tilted_scene_is_levelled_from_a_steeper_prior(tmp_path, tilt):
+def test_a_steeply_tilted_scene_is_levelled_from_a_steeper_prior(tmp_path, monkeypatch, tilt):
     # a camera looking steeply down puts the scene's up farther from the camera's up than the votes' cone reaches
     # (max_tilt_deg 40): too few votes agree there, and the estimate from a prior STEEP_PRIOR_DEG steeper finds the
     # analytic up within a degree; without that retry it does not. (This four-object fixture is levelled at up to 50
@@ -345,10 +345,5 @@ def test_a_steeply_tilted_scene_is_levelled_from_a_steeper_prior(tmp_path, tilt)
     lev = level_objects(data.objects, PlacedParams(), data.camera)
     assert angle_deg(source_up(lev), truth) < 1.0
     assert lev.estimate.steep_prior is not None and "steep_prior" in lev.estimate.to_dict()
-    from phiscene import levelling
-
-    levelling.MIN_AGREEMENT, kept = 0, levelling.MIN_AGREEMENT  # never retried
-    try:
-        assert angle_deg(source_up(level_objects(data.objects, PlacedParams(), data.camera)), truth) > 5.0
-    finally:
-        levelling.MIN_AGREEMENT = kept
+    monkeypatch.setattr("phiscene.levelling.MIN_AGREEMENT", 0)  # never retried
+    assert angle_deg(source_up(level_objects(data.objects, PlacedParams(), data.camera)), truth) > 5.0

@@ -278,8 +278,7 @@ def estimate_up(meshes: dict[str, trimesh.Trimesh], prior, params: LevelParams =
                                      estimate.votes, steep), agree
     if best.steep_prior is not None:
         log.info("up: %d votes agree within %g deg of the camera's up, %d of a prior %g deg steeper: levelled by "
-                 "%.1f deg", first, params.max_tilt_deg, score[0],
-                 STEEP_PRIOR_DEG, best.tilt_deg)
+                 "%.1f deg", first, params.max_tilt_deg, score[0], STEEP_PRIOR_DEG, best.tilt_deg)
     return best
 
 
