@@ -117,6 +117,37 @@ def test_unit_scale_imports_a_millimetre_scene_as_the_metric_one(tmp_path):
         PlacedParams.from_dict({"unit_scale": 0.0})
 
 
+@pytest.mark.parametrize("offset", [(120.0, -40.0, 7.0), (5.0e5, 3.0, 4.0e6)])
+def test_a_scene_far_from_its_frame_origin_is_centred_not_refused(tmp_path, offset):
+    """The same scene 127 m or 4,000 km from the origin of its frame (a scan in a building's or a map's
+    coordinates), camera included: imported, not refused as not in metres, with the levelling of the scene at the
+    origin (the same rotation, objects and camera in the same places relative to each other within 1e-6 m), its
+    bounding box centred horizontally on the origin, and the transform taking each source vertex to its place."""
+    write_scene(tmp_path, "s", (10.0, 5.0))
+    data = read_rest3d(tmp_path, "s", "sam3d")
+    near = import_placed(data.objects, tmp_path / "near", PlacedParams(), data.camera)
+    shift = np.asarray(offset)
+    moved = [PlacedObject(o.id, o.mesh.copy().apply_translation(shift), o.description, o.source)
+             for o in data.objects]
+    cam = Camera(np.asarray(data.camera.eye) + shift, np.asarray(data.camera.target) + shift, data.camera.fov_y_deg)
+    far = import_placed(moved, tmp_path / "far", PlacedParams(), cam)
+    T_near, T_far = (np.asarray(json.loads((tmp_path / d / "import.json").read_text())["transform"])
+                     for d in ("near", "far"))
+    assert np.allclose(T_far[:3, :3], T_near[:3, :3], atol=1e-9)
+    worlds = {o.id: o.world_mesh() for o in far.objects}
+    lo = np.min([w.bounds[0] for w in worlds.values()], axis=0)
+    hi = np.max([w.bounds[1] for w in worlds.values()], axis=0)
+    assert np.allclose(0.5 * (lo + hi)[:2], 0.0, atol=1e-6)
+    step = far.objects[0].pose[:3, 3] - near.get(far.objects[0].id).pose[:3, 3]
+    assert abs(step[2]) < 1e-6  # the same ground
+    for o in moved:
+        assert np.allclose(far.get(o.id).pose[:3, 3], near.get(o.id).pose[:3, 3] + step, atol=1e-6)
+        assert np.allclose(trimesh.transform_points(o.mesh.vertices, T_far).min(axis=0),
+                           worlds[o.id].bounds[0], atol=1e-6)
+    cams = [json.loads((tmp_path / d / "reference" / "camera.json").read_text()) for d in ("near", "far")]
+    assert np.allclose(np.asarray(cams[1]["eye"]), np.asarray(cams[0]["eye"]) + step, atol=1e-6)
+
+
 def test_reference_levelling_is_the_kabsch_rotation(tmp_path):
     R = write_scene(tmp_path, "s", (14.0, 0.0), variant="sam3d")
     write_scene(tmp_path, "s", (0.0, 0.0), variant="ours")

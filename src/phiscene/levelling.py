@@ -44,6 +44,7 @@ import numpy as np
 import trimesh
 
 from phiscene.params import Params
+from phiscene.tolerances import TOL
 
 log = logging.getLogger(__name__)
 
@@ -469,6 +470,10 @@ def levelling_transform(parts: list[np.ndarray], up, forward=None, floor_band: f
                         floor_rest_deg: float = 0.0) -> np.ndarray:
     """The rigid transform (4, 4) that levels a scene: ``up`` -> +z, ``forward`` -> +y, the ground at z = 0.
 
+    A scene that would then reach farther than ``TOL.max_coordinate`` from the origin horizontally (its frame is a
+    building's or a map's, not a camera's) is also moved horizontally so that the centre of its bounding box is
+    at the origin; any other keeps its horizontal position (a camera-frame scene: the camera above the origin).
+
     Parameters
     ----------
     parts : list of (n_i, 3) float
@@ -490,7 +495,16 @@ def levelling_transform(parts: list[np.ndarray], up, forward=None, floor_band: f
             heading = np.arctan2(f[0], f[1])  # rotate about z so that f's horizontal part points along +y
             c, s = np.cos(heading), np.sin(heading)
             R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ R
+    turned = [np.asarray(p, dtype=float) @ R.T for p in parts]
     T = np.eye(4)
     T[:3, :3] = R
-    T[2, 3] = -floor_height([np.asarray(p, dtype=float) @ R.T for p in parts], floor_band, floor_rest_deg)
+    T[2, 3] = -floor_height(turned, floor_band, floor_rest_deg)
+    lo = np.min([p.min(axis=0) for p in turned], axis=0)
+    hi = np.max([p.max(axis=0) for p in turned], axis=0)
+    if np.abs(np.concatenate([lo[:2], hi[:2]])).max() > TOL.max_coordinate:
+        # a frame far from the scene (a scan in a building's or a map's coordinates): its horizontal centre to the
+        # origin, instead of a refusal as not in metres (no camera-frame scene lies that far from its camera)
+        T[:2, 3] = -0.5 * (lo[:2] + hi[:2])
+        log.info("the scene lies %.1f m from the origin of its frame: moved by (%.3f, %.3f) m to centre it",
+                 float(np.linalg.norm(T[:2, 3])), *T[:2, 3])
     return T

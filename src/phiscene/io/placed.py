@@ -73,7 +73,8 @@ class PlacedParams(Params):
         Metres per source unit: multiplies every vertex, placement translation and camera position (1 for metric
         output such as SAM 3D Objects'; 0.001 for millimetres, 0.01 for centimetres). A scene whose levelled
         objects are implausible in metres (an object more than ``TOL.max_object_size`` across, or reaching
-        farther than ``TOL.max_coordinate`` from the origin) is refused before anything is written.
+        farther than ``TOL.max_coordinate`` from the origin; a scene lying that far away in its own frame is first
+        centred, :func:`~phiscene.levelling.levelling_transform`) is refused before anything is written.
     level
         Estimate gravity and level the scene (false: trust the up convention).
     levelling
