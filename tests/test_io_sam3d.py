@@ -1,9 +1,7 @@
 """SAM 3D Objects importer: fixtures in SAM 3D's exact output format whose world result is known analytically."""
 
 import json
-import os
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -289,12 +287,10 @@ def test_a_folder_of_runs_is_a_workflow_suite(tmp_path):
     """`source: {kind: sam3d, root: ...}`: each run a scene, levelled with the poster's wall; a run with camera.json
     also gives the photo's camera (and the faithful grounding reads it); the real-scenes table plans over the runs;
     an unknown key of the source is refused by the config check, naming it."""
-    import subprocess
-    import sys
-
     import yaml
 
     from phiscene.scene import load_scene
+    from tests import workflow_run
 
     runs = tmp_path / "runs"
     runs.mkdir()
@@ -307,12 +303,9 @@ def test_a_folder_of_runs_is_a_workflow_suite(tmp_path):
     cfg = {"suites": {"mine": {"source": {"kind": "sam3d", "root": str(runs)}}},
            "tables": {"mine": {"kind": "real", "suite": "mine", "methods": ["initial", "phi_scene"]}}}
     (tmp_path / "mine.yaml").write_text(yaml.safe_dump(cfg))
-    root = Path(__file__).resolve().parents[1]
 
     def snakemake(*args):
-        return subprocess.run([sys.executable, "-m", "snakemake", "-s", str(root / "Snakefile"), "--directory",
-                               str(tmp_path / "wf"), *args, "--configfile", str(tmp_path / "mine.yaml")],
-                              capture_output=True, text=True, timeout=600, env={**os.environ, "PYTHONHASHSEED": "0"})
+        return workflow_run.snakemake(tmp_path / "wf", [tmp_path / "mine.yaml"], *args)
 
     plan = snakemake("-n", "results/tables/mine.csv")
     assert plan.returncode == 0, plan.stderr[-3000:]

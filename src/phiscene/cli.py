@@ -5,8 +5,8 @@
     phiscene bench OUT_DIR [--suite contact] [--index 0] [--config ...]
     phiscene failures [RESULTS_DIR] [--why]
     phiscene import-sam3d IN_DIR OUT_DIR [--floor NX NY NZ D] [--unit-scale 1] [--no-walls]
-    phiscene import-placed MESH_DIR OUT_DIR [--up y|z] [--placements P.json] [--unit-scale 1] [--no-level]
-                           [--no-walls]
+    phiscene import-placed MESH_DIR OUT_DIR [--up y|z] [--placements P.json] [--camera C.json] [--unit-scale 1]
+                           [--no-level] [--no-walls]
     phiscene import-rest3d ROOT SCENE OUT_DIR [--variant sam3d|ours|dc|gen3dsr|sg] [--no-level] [--no-walls]
     phiscene import-front3d ROOT OUT_DIR [--room SCENE_ID ...] [--test-rooms 1000] [--initial PATTERN]
     phiscene export SCENE_JSON OUT_DIR [--proxies P.npz] [--topology T.json] [--no-check] [--demo]
@@ -246,6 +246,7 @@ def _report_import(scene, out_dir: str) -> None:
 
 def cmd_import_placed(args: argparse.Namespace) -> None:
     from phiscene.io.placed import PlacedParams, import_placed, read_placed_dir
+    from phiscene.io.placed_suite import read_camera
 
     try:
         params = PlacedParams.from_dict({"up": args.up, "unit_scale": args.unit_scale, "level": not args.no_level,
@@ -253,7 +254,9 @@ def cmd_import_placed(args: argparse.Namespace) -> None:
     except ValueError as exc:
         raise PhisceneError(f"--unit-scale: {exc}") from None
     objects = read_placed_dir(args.mesh_dir, args.placements)
-    scene = import_placed(objects, args.out_dir, params, source={"kind": "placed", "path": str(args.mesh_dir)})
+    camera = read_camera(args.camera) if args.camera else None
+    scene = import_placed(objects, args.out_dir, params, camera,
+                          source={"kind": "placed", "path": str(args.mesh_dir)})
     _report_import(scene, args.out_dir)
 
 
@@ -350,6 +353,8 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("out_dir")
     pl.add_argument("--up", choices=("y", "z"), default="y", help="up-axis convention of the files (default y)")
     pl.add_argument("--placements", help="JSON {id: {pos, quat (w,x,y,z)} | 4x4} applied to each mesh")
+    pl.add_argument("--camera", help="JSON {eye, target, fov_y_deg}: the photo's camera in the files' frame and units "
+                                     "(written as reference/camera.json)")
     pl.add_argument("--unit-scale", type=float, default=1.0,
                     help="metres per source unit (default 1; 0.001 for millimetres, 0.01 for centimetres)")
     pl.add_argument("--no-level", action="store_true", help="trust the up convention (no gravity estimate)")

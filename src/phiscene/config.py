@@ -84,6 +84,7 @@ SOURCE_PARAMS: dict[str, str] = {
     "front3d": "phiscene.io.front3d:Front3dParams",
     "rest3d": "phiscene.io.rest3d:Rest3dSource",
     "sam3d": "phiscene.io.sam3d:Sam3dSource",
+    "placed": "phiscene.io.placed_suite:PlacedSource",
 }
 
 

@@ -86,40 +86,43 @@ rule rest3d_scene:
 
 
 # A suite with `source: {kind: sam3d, root: ...}`: one SAM 3D Objects run (one folder of <object id>/pose.json + mesh)
-# per scene, levelled and its walls estimated (phiscene.io.sam3d). A run with camera.json (the intrinsics) also gives
-# the photo's camera; one rule per suite and case, since a rule's outputs are fixed.
-for _suite in [s for s in source_suites("sam3d") if suite_available(s)]:
-    _cameras = sam3d_camera_scenes(_suite)
-    for _with_camera, _scenes in ((True, _cameras), (False, [s for s in scene_ids(_suite) if s not in _cameras])):
-        if not _scenes:
-            continue
+# per scene (phiscene.io.sam3d); with `source: {kind: placed, root: ...}`: one folder of per-object meshes placed in
+# one frame per scene (phiscene.io.placed_suite). Each is levelled and its walls estimated. A scene with camera.json
+# also gives the photo's camera; one rule per suite and case, since a rule's outputs are fixed.
+# (`script:` takes no loop variable: a rule's script path is read when the job runs, after the loop has ended)
+for _kind in ("sam3d", "placed"):
+    for _suite in [s for s in source_suites(_kind) if suite_available(s)]:
+        _cameras = camera_scenes(_suite)
+        for _with_camera, _scenes in ((True, _cameras), (False, [s for s in scene_ids(_suite) if s not in _cameras])):
+            if not _scenes:
+                continue
 
-        rule:
-            name:
-                f"sam3d_scene_{_suite}" + ("_camera" if _with_camera else "")
-            input:
-                sam3d_inputs,
-            output:
-                **{
-                    "initial": "results/scenes/{suite}/{scene}/initial/scene.json",
-                    "record": "results/scenes/{suite}/{scene}/import.json",
-                    **({"camera": "results/scenes/{suite}/{scene}/reference/camera.json"} if _with_camera else {}),
-                },
-            wildcard_constraints:
-                suite=_suite,
-                scene=alternation(_scenes),
-            params:
-                source=suite_source,
-                version=V.IMPORT,
-            log:
-                "results/logs/benchmark/{suite}/{scene}.log",
-            benchmark:
-                "results/benchmarks/benchmark/{suite}/{scene}.tsv"
-            threads: 1
-            resources:
-                mem_mb=2000,
-                runtime=30,
-            conda:
-                ENV
-            script:
-                "../scripts/sam3d_scene.py"
+            rule:
+                name:
+                    f"{_kind}_scene_{_suite}" + ("_camera" if _with_camera else "")
+                input:
+                    source_scene_inputs,
+                output:
+                    **{
+                        "initial": "results/scenes/{suite}/{scene}/initial/scene.json",
+                        "record": "results/scenes/{suite}/{scene}/import.json",
+                        **({"camera": "results/scenes/{suite}/{scene}/reference/camera.json"} if _with_camera else {}),
+                    },
+                wildcard_constraints:
+                    suite=_suite,
+                    scene=alternation(_scenes),
+                params:
+                    source=suite_source,
+                    version=V.IMPORT,
+                log:
+                    "results/logs/benchmark/{suite}/{scene}.log",
+                benchmark:
+                    "results/benchmarks/benchmark/{suite}/{scene}.tsv"
+                threads: 1
+                resources:
+                    mem_mb=2000,
+                    runtime=30,
+                conda:
+                    ENV
+                script:
+                    "../scripts/source_scene.py"

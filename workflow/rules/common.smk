@@ -21,6 +21,10 @@ def scene_ids(suite):
         from phiscene.io.sam3d import scene_ids as _sam3d_scene_ids
 
         return _sam3d_scene_ids(s["source"]["root"])
+    if "source" in s and s["source"]["kind"] == "placed":  # every scene folder in the source's folder
+        from phiscene.io.placed_suite import scene_ids as _placed_scene_ids
+
+        return _placed_scene_ids(s["source"]["root"])
     if "source" in s:  # 3D-FRONT test rooms (phiscene.io.front3d), from the source's room list file
         from phiscene.io.front3d import scene_ids as _front3d_scene_ids
 
@@ -46,7 +50,7 @@ def benchmark_suites():
 
 def source_suites(kind):
     """Suites read from a real-data `source` of one kind (front3d: 3D-FRONT; rest3d: REST3D page assets; sam3d: a
-    folder of SAM 3D Objects runs)."""
+    folder of SAM 3D Objects runs; placed: a folder of scenes of per-object meshes placed in one frame)."""
     return [s for s, spec in config["suites"].items() if spec.get("source", {}).get("kind") == kind]
 
 
@@ -74,18 +78,39 @@ def sam3d_inputs(wildcards):
     return found or [os.path.join(folder, "<object id>", "pose.json")]
 
 
-def sam3d_has_camera(suite, scene):
-    """Whether a run of a `sam3d` suite gives the camera's intrinsics (camera.json): its import writes the photo's
-    camera (reference/camera.json)."""
+def placed_inputs(wildcards):
+    """The files one scene of a `placed` suite's import reads (its mesh files, placements.json and camera.json): a
+    missing scene fails the DAG naming the missing path."""
+    from phiscene.io.placed import MESH_SUFFIXES
+
+    folder = os.path.join(config["suites"][wildcards.suite]["source"]["root"], wildcards.scene)
+    found = sorted(
+        f.path
+        for f in (os.scandir(folder) if os.path.isdir(folder) else [])
+        if f.is_file()
+        and (os.path.splitext(f.name)[1].lower() in MESH_SUFFIXES or f.name in ("placements.json", "camera.json"))
+    )
+    return found or [os.path.join(folder, "<object>.glb")]
+
+
+def source_scene_inputs(wildcards):
+    """The files one scene of a `sam3d` or `placed` suite's import reads (`sam3d_inputs`, `placed_inputs`)."""
+    kind = config["suites"][wildcards.suite]["source"]["kind"]
+    return sam3d_inputs(wildcards) if kind == "sam3d" else placed_inputs(wildcards)
+
+
+def source_has_camera(suite, scene):
+    """Whether a scene of a `sam3d` or `placed` suite gives its camera (camera.json: a SAM 3D run's intrinsics, a
+    placed scene's eye, target and field of view): its import writes the photo's camera (reference/camera.json)."""
     return os.path.isfile(os.path.join(config["suites"][suite]["source"]["root"], scene, "camera.json"))
 
 
-def sam3d_camera_scenes(suite):
-    """The runs of a `sam3d` suite that give the camera's intrinsics (`sam3d_has_camera`)."""
+def camera_scenes(suite):
+    """The scenes of a `sam3d` or `placed` suite that give their camera (`source_has_camera`)."""
     root = config["suites"][suite]["source"]["root"]
     if not os.path.isdir(root):
         return []
-    return [s for s in scene_ids(suite) if sam3d_has_camera(suite, s)]
+    return [s for s in scene_ids(suite) if source_has_camera(suite, s)]
 
 
 def suite_generator(wildcards):
@@ -239,7 +264,10 @@ def phi_scene_inputs(wildcards):
     has_camera = (
         wildcards.suite in benchmark_suites()
         or wildcards.suite in source_suites("rest3d")
-        or (wildcards.suite in source_suites("sam3d") and sam3d_has_camera(wildcards.suite, wildcards.scene))
+        or (
+            wildcards.suite in source_suites("sam3d") + source_suites("placed")
+            and source_has_camera(wildcards.suite, wildcards.scene)
+        )
     )
     if faithful.get("enabled") and (faithful.get("ray") or faithful.get("hidden_share", 0) > 0) and has_camera:
         inputs["camera"] = f"{base}/reference/camera.json"

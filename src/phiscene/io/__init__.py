@@ -9,12 +9,31 @@
 
 ``placed``
     Per-object meshes already placed in one frame (GLB/PLY/OBJ; ``rest3d`` is one layout of them) -> a levelled
-    scene.
+    scene; ``placed_suite``: a folder of such scenes as a workflow suite.
+
+:func:`run_source_scene` imports one scene of a workflow suite whose ``source`` is a folder of scenes (``sam3d``,
+``placed``).
 
 Predictions of other methods are imported by :mod:`phiscene.baselines.external`.
 """
 
 import math
+from importlib import import_module
+from pathlib import Path
+
+#: Source kind -> ``module:function(source, scene, out_dir)`` importing one of its scenes (:func:`run_source_scene`).
+SCENE_IMPORTERS = {
+    "sam3d": "phiscene.io.sam3d:run_sam3d_scene",
+    "placed": "phiscene.io.placed_suite:run_placed_scene",
+}
+
+
+def run_source_scene(source: dict, scene: str, out_dir: str | Path):
+    """Workflow stage: scene ``scene`` of a folder-of-scenes ``source`` (``source["kind"]`` in
+    :data:`SCENE_IMPORTERS`) as ``OUT_DIR/initial/scene.json`` (+ ``reference/``, ``import.json``); returns the
+    :class:`~phiscene.scene.Scene` written."""
+    module, _, name = SCENE_IMPORTERS[source["kind"]].partition(":")
+    return getattr(import_module(module), name)(source, scene, out_dir)
 
 
 def check_unit_scale(value: float) -> None:

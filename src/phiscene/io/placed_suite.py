@@ -1,0 +1,121 @@
+"""A folder of placed-mesh scenes as a workflow suite (``suites.<suite>.source`` with ``kind: placed``).
+
+Most image-to-3D pipelines other than SAM 3D Objects write one mesh file per object with every vertex already in a
+common scene frame (:mod:`phiscene.io.placed`). A folder of such scenes is a suite::
+
+    <root>/<scene>/<object>.glb|.gltf|.ply|.obj   one mesh per object, the file stem naming it
+    <root>/<scene>/placements.json                optional: per-object placements (phiscene.io.placed's format)
+    <root>/<scene>/camera.json                    optional: the photo's camera, source frame and units:
+                                                  {"eye": [x, y, z], "target": [x, y, z], "fov_y_deg": 50}
+
+Each scene is imported as ``phiscene import-placed`` imports one folder (:func:`phiscene.io.placed.import_placed`:
+levelled, its walls estimated; ``params`` takes the up convention, units, levelling and walls), with the camera
+when the scene gives one.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from phiscene.errors import InputError
+from phiscene.io.placed import MESH_SUFFIXES, Camera, PlacedParams, import_placed, read_placed_dir
+from phiscene.params import Params
+from phiscene.scene import Scene
+
+#: The optional files of a scene folder.
+PLACEMENTS_FILE = "placements.json"
+CAMERA_FILE = "camera.json"
+#: Scene folder names the workflow takes (its ``scene`` wildcard).
+SCENE_NAME = re.compile(r"^[A-Za-z0-9_]+$")
+
+
+@dataclass(frozen=True)
+class PlacedSource(Params):
+    """A suite of placed-mesh scenes (module docstring layout).
+
+    Attributes
+    ----------
+    root
+        The folder of scenes, relative to the working directory.
+    kind
+        ``placed``.
+    params
+        Import settings (:class:`~phiscene.io.placed.PlacedParams`: up convention, units, levelling, walls).
+    """
+
+    _label = "placed-mesh source"
+
+    root: str
+    kind: str = "placed"
+    params: PlacedParams = field(default_factory=PlacedParams)
+
+    def check(self) -> None:
+        """Reject another kind (``ValueError``)."""
+        if self.kind != "placed":
+            raise ValueError(f"placed-mesh source kind must be 'placed', got {self.kind!r}")
+
+
+def scene_ids(root: str | Path) -> list[str]:
+    """The scenes under ``root``: its sub-folders holding at least one mesh file, sorted.
+
+    Raises
+    ------
+    InputError
+        ``root`` is not a folder, holds no scene, or a scene folder's name is not ``[A-Za-z0-9_]+``.
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise InputError(root, None, "folder of placed-mesh scenes not found")
+    found = sorted(p for p in root.iterdir() if p.is_dir() and any(f.suffix.lower() in MESH_SUFFIXES
+                                                                      for f in p.iterdir()))
+    if not found:
+        raise InputError(root, None, f"no scenes (<scene>/<object>{'|'.join(MESH_SUFFIXES)}) in the folder")
+    for p in found:
+        if not SCENE_NAME.match(p.name):
+            raise InputError(p, None, "a scene folder's name may hold only letters, digits and '_': rename it")
+    return [p.name for p in found]
+
+
+def read_camera(path: str | Path) -> Camera:
+    """The camera of a scene folder's ``camera.json`` (module docstring format).
+
+    Raises
+    ------
+    InputError
+        Unreadable JSON, a missing key, or a value of the wrong shape, naming the file and the key.
+    """
+    path = Path(path)
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise InputError(path, None, f"cannot read the camera ({exc})") from None
+    if not isinstance(data, dict):
+        raise InputError(path, None, 'expected {"eye": [x, y, z], "target": [x, y, z], "fov_y_deg": f}')
+    values = {}
+    for key, shape in (("eye", (3,)), ("target", (3,)), ("fov_y_deg", ())):
+        if key not in data:
+            raise InputError(path, key, "missing")
+        try:
+            values[key] = np.asarray(data[key], dtype=float)
+        except (TypeError, ValueError):
+            values[key] = None
+        if values[key] is None or values[key].shape != shape:
+            raise InputError(path, key, f"expected {'a number' if not shape else '3 numbers'}, got {data[key]!r}")
+    return Camera(values["eye"], values["target"], float(values["fov_y_deg"]))
+
+
+def run_placed_scene(source: dict, scene: str, out_dir: str | Path) -> Scene:
+    """Workflow stage: one scene of a ``placed`` source as ``OUT_DIR/initial/scene.json`` (+ ``reference/``,
+    ``import.json``)."""
+    src = PlacedSource.from_dict(source)
+    folder = Path(src.root) / scene
+    placements = folder / PLACEMENTS_FILE
+    objects = read_placed_dir(folder, placements if placements.is_file() else None)
+    camera = read_camera(folder / CAMERA_FILE) if (folder / CAMERA_FILE).is_file() else None
+    return import_placed(objects, out_dir, src.params, camera,
+                         source={"kind": "placed", "root": src.root, "scene": scene})

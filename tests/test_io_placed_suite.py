@@ -1,0 +1,140 @@
+"""A folder of placed-mesh scenes as a workflow suite (`source: {kind: placed}`, phiscene.io.placed_suite)."""
+
+import json
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from phiscene.errors import InputError
+from phiscene.io.placed_suite import read_camera, run_placed_scene, scene_ids
+from phiscene.io.rest3d import import_rest3d
+from phiscene.scene import load_scene
+from tests.rest3d_fixture import write_scene
+
+
+def _as_placed(rest3d_root: Path, scene: str, out: Path, camera: bool = True) -> None:
+    """The fixture's REST3D scene written in the placed layout: its meshes, frame 0's placements as
+    placements.json and the page's camera as camera.json."""
+    folder = rest3d_root / "assets" / scene / "sam3d"
+    sim = json.loads((folder / "simulation.json").read_text())
+    out.mkdir(parents=True)
+    for f in (folder / "meshes").iterdir():
+        shutil.copy(f, out / f.name)
+    (out / "placements.json").write_text(json.dumps(
+        {a: {"pos": sim["tracks"][a]["pos"][0], "quat": sim["tracks"][a]["quat"][0]} for a in sim["actors"]}))
+    if camera:
+        cam = sim["camera"]
+        (out / "camera.json").write_text(json.dumps({"eye": cam["position"], "target": cam["target"],
+                                                     "fov_y_deg": cam["fov"]}))
+
+
+def test_a_placed_scene_imports_as_its_rest3d_twin(tmp_path):
+    """The same meshes, placements and camera in both layouts: the same levelled scene (poses to 1e-9 m), the same
+    camera and walls; without camera.json, no reference camera."""
+    write_scene(tmp_path / "r3d", "s", (14.0, -6.0))
+    _as_placed(tmp_path / "r3d", "s", tmp_path / "root" / "withcam")
+    _as_placed(tmp_path / "r3d", "s", tmp_path / "root" / "nocam", camera=False)
+    assert scene_ids(tmp_path / "root") == ["nocam", "withcam"]
+    twin = import_rest3d(tmp_path / "r3d", "s", tmp_path / "twin")
+    source = {"kind": "placed", "root": str(tmp_path / "root")}
+    placed = run_placed_scene(source, "withcam", tmp_path / "placed")
+    assert sorted(placed.ids) == sorted(twin.ids)
+    for o in twin.objects:
+        assert np.allclose(placed.get(o.id).pose, o.pose, atol=1e-9)
+    cams = [json.loads((tmp_path / d / "reference" / "camera.json").read_text()) for d in ("twin", "placed")]
+    assert np.allclose(cams[0]["world_to_camera"], cams[1]["world_to_camera"], atol=1e-9)
+    assert [p.id for p in placed.structure] == [p.id for p in twin.structure] and placed.structure
+    bare = run_placed_scene(source, "nocam", tmp_path / "bare")
+    assert not (tmp_path / "bare" / "reference" / "camera.json").exists()
+    for o in twin.objects:  # levelled the same, only the heading (a turn about z) is not the camera's
+        assert np.allclose(bare.get(o.id).world_mesh().bounds[:, 2], o.world_mesh().bounds[:, 2], atol=1e-6)
+
+
+def test_bad_folders_and_cameras_are_named(tmp_path):
+    with pytest.raises(InputError, match="placed-mesh scenes not found"):
+        scene_ids(tmp_path / "absent")
+    (tmp_path / "root" / "notes").mkdir(parents=True)
+    with pytest.raises(InputError, match=r"root: no scenes"):
+        scene_ids(tmp_path / "root")
+    (tmp_path / "root" / "my-scene").mkdir()
+    (tmp_path / "root" / "my-scene" / "box.ply").write_text("")
+    with pytest.raises(InputError, match=r"my-scene: a scene folder's name"):
+        scene_ids(tmp_path / "root")
+    cam = tmp_path / "camera.json"
+    for text, match in (("{", "cannot read the camera"), ("[1, 2]", "expected"),
+                        ('{"eye": [0, 1, 2], "target": [0, 0, 0]}', "fov_y_deg: missing"),
+                        ('{"eye": [0, 1], "target": [0, 0, 0], "fov_y_deg": 50}', "eye: expected 3 numbers"),
+                        ('{"eye": [0, 1, 2], "target": "here", "fov_y_deg": 50}', "target: expected 3 numbers")):
+        cam.write_text(text)
+        with pytest.raises(InputError, match=re.escape(str(cam)) + ".*" + match):
+            read_camera(cam)
+
+
+@pytest.mark.workflow
+def test_a_folder_of_placed_scenes_is_a_workflow_suite(tmp_path):
+    """`source: {kind: placed, root: ...}`: each scene folder a scene (one rule for those with camera.json, one
+    for the others), imported as `run_placed_scene` imports it; the real-scenes table plans over them; an unknown
+    key of the source is refused by the config check, naming it."""
+    import yaml
+
+    from tests import workflow_run
+
+    write_scene(tmp_path / "r3d", "s", (10.0, 5.0))
+    _as_placed(tmp_path / "r3d", "s", tmp_path / "root" / "withcam")
+    _as_placed(tmp_path / "r3d", "s", tmp_path / "root" / "nocam", camera=False)
+    cfg = {"suites": {"mine": {"source": {"kind": "placed", "root": str(tmp_path / "root")}}},
+           "tables": {"mine": {"kind": "real", "suite": "mine", "methods": ["initial", "phi_scene"]}}}
+    (tmp_path / "mine.yaml").write_text(yaml.safe_dump(cfg))
+
+    def snakemake(*args):
+        return workflow_run.snakemake(tmp_path / "wf", [tmp_path / "mine.yaml"], *args)
+
+    plan = snakemake("-n", "results/tables/mine.csv")
+    assert plan.returncode == 0, plan.stderr[-3000:]
+    for rule in ("placed_scene_mine_camera", "placed_scene_mine"):
+        assert re.search(rf"^{rule}\s+1$", plan.stdout + plan.stderr, re.M), plan.stdout[-3000:]
+    scenes = ["results/scenes/mine/withcam/initial/scene.json", "results/scenes/mine/withcam/reference/camera.json",
+              "results/scenes/mine/nocam/initial/scene.json"]
+    res = snakemake("-j2", *scenes)
+    assert res.returncode == 0, res.stderr[-3000:]
+    direct = run_placed_scene(cfg["suites"]["mine"]["source"], "withcam", tmp_path / "direct")
+    built = load_scene(tmp_path / "wf" / scenes[0])
+    for o in direct.objects:
+        assert np.allclose(built.get(o.id).pose, o.pose, atol=1e-12)
+    assert not (tmp_path / "wf/results/scenes/mine/nocam/reference/camera.json").exists()
+    cfg["suites"]["mine"]["source"]["upp"] = "z"
+    (tmp_path / "mine.yaml").write_text(yaml.safe_dump(cfg))
+    bad = snakemake("-n", "results/tables/mine.csv")
+    said = bad.stdout + bad.stderr
+    assert bad.returncode != 0 and "suites.mine.source" in said and "upp" in said, said[-2000:]
+
+
+def test_import_placed_command_takes_the_camera(tmp_path):
+    """`phiscene import-placed DIR OUT --placements P --camera C`: the REST3D twin's scene and camera; a bad camera
+    file is one error line naming it."""
+    write_scene(tmp_path / "r3d", "s", (8.0, 3.0))
+    folder = tmp_path / "scene"
+    _as_placed(tmp_path / "r3d", "s", folder)
+    twin = import_rest3d(tmp_path / "r3d", "s", tmp_path / "twin")
+
+    def phiscene(*args):
+        return subprocess.run([sys.executable, "-m", "phiscene.cli", *args], capture_output=True, text=True,
+                              cwd=tmp_path, timeout=300)
+
+    res = phiscene("import-placed", str(folder), str(tmp_path / "out"), "--placements",
+                   str(folder / "placements.json"), "--camera", str(folder / "camera.json"))
+    assert res.returncode == 0, res.stderr[-2000:]
+    out = load_scene(tmp_path / "out" / "initial" / "scene.json")
+    for o in twin.objects:
+        assert np.allclose(out.get(o.id).pose, o.pose, atol=1e-9)
+    cams = [json.loads((tmp_path / d / "reference" / "camera.json").read_text()) for d in ("twin", "out")]
+    assert np.allclose(cams[0]["world_to_camera"], cams[1]["world_to_camera"], atol=1e-9)
+    (tmp_path / "bad.json").write_text('{"eye": [0, 1, 2], "target": [0, 1, 2], "fov_y_deg": 50}')
+    res = phiscene("import-placed", str(folder), str(tmp_path / "bad"), "--camera", str(tmp_path / "bad.json"))
+    assert res.returncode == 1 and res.stderr.strip().count("\n") == 0 and "apart" in res.stderr, res.stderr
+    assert not (tmp_path / "bad").exists()
