@@ -232,3 +232,26 @@ def test_bench_command_refuses_a_suite_no_generator_builds(tmp_path):
         assert f"--suite {suite!r}: not built by an embedded benchmark generator (known: clutter, contact, rooms" \
             in res.stderr, res.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_ground_names_the_reconstruction_suite_for_reconstructed_meshes(tmp_path):
+    """Without --suite, a scene whose median mesh has over 10,000 faces (a reconstruction) gets a note naming the
+    config's real-data suite with its own proxy settings (the shipped config: `real`); clean meshes, or a config
+    without such a suite, get none."""
+    import yaml
+
+    from phiscene.cli import RECONSTRUCTION_FACES, _reconstruction_hint
+    from phiscene.config import packaged_config_path
+
+    cfg = yaml.safe_load(packaged_config_path().read_text())
+    fine = trimesh.creation.icosphere(subdivisions=5, radius=0.05)  # 20,480 faces
+    assert len(fine.faces) > RECONSTRUCTION_FACES
+    scan, box = (save_mesh(m, tmp_path / f"meshes/{n}.glb") for n, m in
+                 (("scan", fine), ("box", trimesh.creation.box([0.1, 0.1, 0.1]))))
+    for name, meshes in (("scanned", [scan, scan, box]), ("clean", [box, box, scan])):
+        save_scene(Scene([SceneObject(f"o{k}", m, make_pose(translation=[0.3 * k, 0, 0.05]))
+                          for k, m in enumerate(meshes)]), tmp_path / f"{name}/scene.json")
+    hint = _reconstruction_hint(cfg, tmp_path / "scanned/scene.json")
+    assert hint is not None and "--suite real" in hint and "20,480 faces" in hint
+    assert _reconstruction_hint(cfg, tmp_path / "clean/scene.json") is None
+    assert _reconstruction_hint({"proxies": {}}, tmp_path / "scanned/scene.json") is None

@@ -78,6 +78,30 @@ def _proxy_settings(cfg: dict, suite: str | None) -> dict:
     return suite_proxies(cfg, suite)
 
 
+#: A scene whose median mesh has more faces than this is a reconstruction (SAM 3D Objects writes about 30,000 per
+#: object; the embedded benchmark's clean meshes a few hundred): :func:`cmd_ground` names the suites whose lighter
+#: proxy settings are made for such meshes when none is given.
+RECONSTRUCTION_FACES = 10_000
+
+
+def _reconstruction_hint(cfg: dict, scene_path: Path) -> str | None:
+    """A note for ``phiscene ground`` without ``--suite`` on a scene of reconstructed meshes: the config's suites
+    of real data with a ``proxies`` override (the ``real`` suite's lighter CoACD search), or ``None``."""
+    import numpy as np
+
+    from phiscene.scene import load_scene
+
+    suites = [name for name, s in (cfg.get("suites") or {}).items() if "source" in s and "proxies" in s]
+    if not suites:
+        return None
+    faces = float(np.median([len(o.mesh().faces) for o in load_scene(scene_path).objects]))
+    if faces <= RECONSTRUCTION_FACES:
+        return None
+    return (f"note: {scene_path}: its meshes are reconstructions (median {faces:,.0f} faces), decomposed with the "
+            f"config's global proxy settings; --suite {suites[0]} takes the lighter CoACD search made for them "
+            f"(README 'The phiscene command')")
+
+
 def _scene_file(path: Path) -> Path:
     return path / "scene.json" if path.is_dir() else path
 
@@ -106,6 +130,9 @@ def cmd_ground(args: argparse.Namespace) -> None:
         assembly = method_assembly(cfg, args.method)
         backend = args.topology or methods[args.method].get("topology", "geometric")
     proxy_settings = _proxy_settings(cfg, args.suite)
+    hint = None if args.suite is not None else _reconstruction_hint(cfg, scene)
+    if hint:
+        print(hint, file=sys.stderr, flush=True)
     given = Path(args.given) if args.given else scene.parent.parent / "gt" / "topology.json"
     if backend == "given" and not given.is_file():
         raise PhisceneError(f"{given}: topology file not found (pass --given FILE)")
