@@ -119,4 +119,9 @@ def main(argv: list[str]) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    from phiscene.errors import PhisceneError
+
+    try:
+        main(sys.argv[1:])
+    except PhisceneError as exc:  # the data absent or broken: one line naming the path
+        sys.exit(f"levelling: {exc}")
