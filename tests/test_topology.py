@@ -433,6 +433,27 @@ def test_geometric_tray_sunk_under_the_floor_still_holds_its_cup(tmp_path, sink_
         assert "raised" not in g.meta
 
 
+def hollow_box(extents, wall):
+    """A hollow, double-walled box (a reconstruction's shell): the outer box and, facing the sealed cavity, an
+    inner box ``wall`` smaller on every side with its faces turned inward."""
+    inner = box(np.asarray(extents) - 2 * wall)
+    inner.invert()
+    return trimesh.util.concatenate([box(extents), inner])
+
+
+def test_geometric_hollow_box_on_a_book_does_not_contain_it(tmp_path):
+    """A hollow box on a book that a depth error pushed 2.5 cm into the box, through its 1 cm bottom wall: the
+    book carries the box (the box's cavity floor, facing up above the book's top, is no surface the book touches;
+    the graph read the box as containing the book until the topology sampled the outer shell). The same scene with
+    a solid box reads the same."""
+    for name, mesh in (("hollow", hollow_box([0.2, 0.2, 0.2], 0.01)), ("solid", box([0.2, 0.2, 0.2]))):
+        specs = [("book", box([0.25, 0.2, 0.04]), make_pose(translation=[0, 0, 0.02])),
+                 ("crate", mesh, make_pose(translation=[0.01, 0, 0.04 - 0.025 + 0.1]))]
+        g = topology.infer(make_scene(tmp_path / name, specs), "geometric")
+        assert g.pairs() == {("ground", "book"), ("book", "crate")}, (name, g.pairs())
+        assert g.order == ["book", "crate"]
+
+
 def test_geometric_side_by_side_boxes_do_not_support_each_other(tmp_path):
     specs = [("big", box([0.3, 0.3, 0.4]), make_pose(translation=[0, 0, 0.2])),
              ("small", box([0.2, 0.2, 0.2]), make_pose(translation=[0.252, 0, 0.1]))]

@@ -144,7 +144,7 @@ def cmd_ground(args: argparse.Namespace) -> None:
         ("proxies", lambda: pipeline.run_proxies(scene, out / "proxies.npz", proxy_settings, cache)),
         (f"topology ({backend})", lambda: pipeline.run_topology(
             scene, out / "topology.json", backend, topo.get(backend, {}), given_path=given if backend == "given"
-            else None, attached=topo.get("attached", {}))),
+            else None, attached=topo.get("attached", {}), cache_dir=cache)),
         ("grounding", lambda: pipeline.run_ground(
             scene, out / "topology.json", out / "proxies.npz", out / "scene.json", out / "assembly.json",
             assembly, cfg.get("sim", {}), cache,

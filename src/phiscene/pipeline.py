@@ -40,10 +40,16 @@ def run_reference(scene_path: str | Path, out_path: str | Path) -> None:
 
 
 def run_topology(scene_path: str | Path, out_path: str | Path, backend: str, params: dict,
-                 given_path: str | Path | None = None, attached: dict | None = None) -> None:
-    """Support graph and placement order of a scene with the named backend (and the attachment decision)."""
+                 given_path: str | Path | None = None, attached: dict | None = None,
+                 cache_dir: str | Path | None = None) -> None:
+    """Support graph and placement order of a scene with the named backend (and the attachment decision).
+
+    ``cache_dir``: where the outer shells of its meshes (:func:`phiscene.solid.use_disk_cache`), which the
+    geometric backend samples, are kept between jobs (the proxies' job makes the same ones)."""
     from phiscene import topology
 
+    if cache_dir is not None:
+        use_disk_cache(cache_dir)
     scene = load_scene(scene_path)
     graph = topology.infer(scene, backend, params, given_path=given_path, attached=attached)
     topology.save(graph, out_path)

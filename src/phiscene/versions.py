@@ -10,7 +10,7 @@ IMPORT = 12  # scenes imported from real data (rest3d_scene); BENCHMARK's number
 FRONT3D = 10  # 3D-FRONT rooms (front3d_scene: their SAM 3D initial scenes go through import_sam3d); BENCHMARK's until
 # import_sam3d levelled scenes without a given floor (they parted)
 PROXIES = 7
-TOPOLOGY = 13
+TOPOLOGY = 14
 GROUND = 35
 METRICS = 8
 TABLES = 7

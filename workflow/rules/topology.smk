@@ -10,6 +10,7 @@ rule topology:
         backend="{backend}",
         settings=topology_settings,
         attached=config["topology"].get("attached", {}),
+        cache_dir=CACHE,
         version=V.TOPOLOGY,
     log:
         "results/logs/topology/{backend}/{suite}/{scene}.log",

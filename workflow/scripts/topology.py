@@ -9,4 +9,5 @@ with job(f"topology {sm.wildcards.backend} {sm.wildcards.suite}/{sm.wildcards.sc
          failure_outputs=sm.output):
     load_plugins(sm.config.get("plugins"))  # registrations of config plugins, in this job's process
     run_topology(scene_path=sm.input.scene, out_path=sm.output[0], backend=sm.params.backend,
-                 params=dict(sm.params.settings), given_path=sm.input.get("given"), attached=dict(sm.params.attached))
+                 params=dict(sm.params.settings), given_path=sm.input.get("given"), attached=dict(sm.params.attached),
+                 cache_dir=sm.params.cache_dir)

@@ -148,6 +148,11 @@ class Contact:
 def prepare_body(object_id: str, local_mesh, pose: np.ndarray, params: "GeometricParams", seed: int) -> Body:
     """Sample an object's world-frame surface and build its query structures.
 
+    The surface is the mesh's outer shell (:func:`phiscene.solid.outer_shell`): a hollow, double-walled
+    reconstruction is the solid it stands for, as in the SDF and the proxies. The faces of its sealed cavity are
+    no surface another object touches: a book reaching into a hollow box's bottom wall has the cavity's floor
+    facing up above it, which read the box on top as containing the book under it.
+
     About one sample per ``params.sample_spacing`` squared of surface,
     clamped to ``[params.min_samples, params.max_samples]``.
 
@@ -167,7 +172,9 @@ def prepare_body(object_id: str, local_mesh, pose: np.ndarray, params: "Geometri
     import trimesh
 
     from phiscene.meshes import oriented_box
+    from phiscene.solid import outer_shell
 
+    local_mesh = outer_shell(local_mesh)
     mesh = local_mesh.copy()
     mesh.apply_transform(pose)
     area = float(mesh.area)
