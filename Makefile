@@ -22,7 +22,8 @@ all: $(STAMP)
 # 718 tests in 5 min 21 s at 047fc2a in a fresh clone, 6 min 37 s with the install; 719 in 5 min 26 s at 3b26732,
 # 6 min 48 s with the install; 732 in 4 min 23 s after the MuJoCo logging commit of stop 59, 5 min 21 s with it;
 # 737 in 4 min 6 s at 2662a7b, 5 min 0 s with the install; 8 min 29 s at 58947fe beside a 2-job workflow run;
-# 745 in 4 min 20 s at a018814 in a fresh clone, 5 min 15 s with the install).
+# 745 in 4 min 20 s at a018814 in a fresh clone, 5 min 15 s with the install; 746 in 4 min 26 s at cea3455, 5 min
+# 26 s with the install).
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n $(JOBS)
 
