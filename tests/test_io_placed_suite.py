@@ -66,10 +66,11 @@ def test_bad_folders_and_cameras_are_named(tmp_path):
     with pytest.raises(InputError, match=r"my-scene: a scene folder's name"):
         scene_ids(tmp_path / "root")
     cam = tmp_path / "camera.json"
-    for text, match in (("{", "cannot read the camera"), ("[1, 2]", "expected"),
+    for text, match in (("{", "not valid JSON"), ("[1, 2]", "expected"),
                         ('{"eye": [0, 1, 2], "target": [0, 0, 0]}', "fov_y_deg: missing"),
-                        ('{"eye": [0, 1], "target": [0, 0, 0], "fov_y_deg": 50}', "eye: expected 3 numbers"),
-                        ('{"eye": [0, 1, 2], "target": "here", "fov_y_deg": 50}', "target: expected 3 numbers")):
+                        ('{"eye": [0, 1], "target": [0, 0, 0], "fov_y_deg": 50}', "eye: expected 3 finite numbers"),
+                        ('{"eye": [0, 1, 2], "target": "here", "fov_y_deg": 50}', "target: not numeric"),
+                        ('{"eye": [0, 1, 2], "target": [0, 0, 0], "fov_y_deg": [50]}', "fov_y_deg: expected a number")):
         cam.write_text(text)
         with pytest.raises(InputError, match=re.escape(str(cam)) + ".*" + match):
             read_camera(cam)

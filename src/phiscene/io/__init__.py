@@ -21,6 +21,10 @@ import math
 from importlib import import_module
 from pathlib import Path
 
+import numpy as np
+
+from phiscene.errors import InputError
+
 #: Source kind -> ``module:function(source, scene, out_dir)`` importing one of its scenes (:func:`run_source_scene`).
 SCENE_IMPORTERS = {
     "sam3d": "phiscene.io.sam3d:run_sam3d_scene",
@@ -34,6 +38,25 @@ def run_source_scene(source: dict, scene: str, out_dir: str | Path):
     :class:`~phiscene.scene.Scene` written."""
     module, _, name = SCENE_IMPORTERS[source["kind"]].partition(":")
     return getattr(import_module(module), name)(source, scene, out_dir)
+
+
+def finite_numbers(data: dict, path: str | Path, key: str, size: int) -> np.ndarray:
+    """Field ``key`` of a JSON object ``data`` read from ``path`` as ``size`` finite numbers, shape (size,).
+
+    Raises
+    ------
+    InputError
+        Naming ``path`` and ``key``: the key missing, a value that is not numeric, or not ``size`` finite numbers.
+    """
+    if key not in data:
+        raise InputError(path, key, "missing")
+    try:
+        v = np.asarray(data[key], dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise InputError(path, key, f"not numeric: {data[key]!r}") from None
+    if v.shape != (size,) or not np.all(np.isfinite(v)):
+        raise InputError(path, key, f"expected {size} finite numbers, got {data[key]!r}")
+    return v
 
 
 def check_unit_scale(value: float) -> None:

@@ -15,14 +15,12 @@ when the scene gives one.
 
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from phiscene.errors import InputError
+from phiscene.io import finite_numbers
 from phiscene.io.placed import MESH_SUFFIXES, Camera, PlacedParams, import_placed, read_placed_dir
 from phiscene.params import Params
 from phiscene.scene import Scene
@@ -89,24 +87,15 @@ def read_camera(path: str | Path) -> Camera:
     InputError
         Unreadable JSON, a missing key, or a value of the wrong shape, naming the file and the key.
     """
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise InputError(path, None, f"cannot read the camera ({exc})") from None
+    from phiscene.schemas import read_json
+
+    data = read_json(path)
     if not isinstance(data, dict):
         raise InputError(path, None, 'expected {"eye": [x, y, z], "target": [x, y, z], "fov_y_deg": f}')
-    values = {}
-    for key, shape in (("eye", (3,)), ("target", (3,)), ("fov_y_deg", ())):
-        if key not in data:
-            raise InputError(path, key, "missing")
-        try:
-            values[key] = np.asarray(data[key], dtype=float)
-        except (TypeError, ValueError):
-            values[key] = None
-        if values[key] is None or values[key].shape != shape:
-            raise InputError(path, key, f"expected {'a number' if not shape else '3 numbers'}, got {data[key]!r}")
-    return Camera(values["eye"], values["target"], float(values["fov_y_deg"]))
+    eye, target = (finite_numbers(data, path, key, 3) for key in ("eye", "target"))
+    if isinstance(data.get("fov_y_deg"), list):  # one number, not a list of one
+        raise InputError(path, "fov_y_deg", f"expected a number, got {data['fov_y_deg']!r}")
+    return Camera(eye, target, float(finite_numbers(data, path, "fov_y_deg", 1)[0]))
 
 
 def run_placed_scene(source: dict, scene: str, out_dir: str | Path) -> Scene:

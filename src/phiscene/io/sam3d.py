@@ -64,7 +64,7 @@ import numpy as np
 
 from phiscene.atomic import atomic_path, write_json
 from phiscene.errors import InputError
-from phiscene.io import check_unit_scale
+from phiscene.io import check_unit_scale, finite_numbers
 from phiscene.levelling import LevelParams, UpEstimate
 from phiscene.params import Params
 from phiscene.scene import Scene, SceneObject, load_scene, save_scene
@@ -194,17 +194,7 @@ def read_pose(path: Path) -> tuple[np.ndarray, dict]:
     data = read_json(path)
     if not isinstance(data, dict):
         raise InputError(path, None, "expected an object with rotation, translation and scale")
-    values = {}
-    for key, size in (("rotation", 4), ("translation", 3)):
-        if key not in data:
-            raise InputError(path, key, "missing")
-        try:
-            v = np.asarray(data[key], dtype=float).reshape(-1)
-        except (TypeError, ValueError):
-            raise InputError(path, key, f"not numeric: {data[key]!r}") from None
-        if v.shape != (size,) or not np.all(np.isfinite(v)):
-            raise InputError(path, key, f"expected {size} finite numbers, got {data[key]!r}")
-        values[key] = v
+    values = {key: finite_numbers(data, path, key, size) for key, size in (("rotation", 4), ("translation", 3))}
     if np.linalg.norm(values["rotation"]) < 1e-9:
         raise InputError(path, "rotation", "zero quaternion")
     if "scale" not in data:
