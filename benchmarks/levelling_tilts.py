@@ -15,12 +15,12 @@ from __future__ import annotations
 
 import sys
 
-import numpy as np
 from scipy.spatial.transform import Rotation
 
 from phiscene.io.placed import source_to_z_up
 from phiscene.io.rest3d import read_rest3d, scene_ids
 from phiscene.levelling import LevelParams, angle_deg, estimate_up
+from phiscene.transforms import make_pose
 
 #: Extra pitch and roll (deg) each scene is turned by.
 TURNS = (-40, -30, -20, -10, 10, 20, 30, 40)
@@ -30,17 +30,10 @@ BANDS = ((0, 20), (20, 30), (30, 35), (35, 40), (40, 50), (50, 90))
 OFF_DEG = 3.0
 
 
-def _turned(meshes: dict, R: np.ndarray) -> dict:
-    T = np.eye(4)
-    T[:3, :3] = R
-    return {k: m.copy().apply_transform(T) for k, m in meshes.items()}
-
-
 def scene_turns(root: str, scene: str, params: LevelParams) -> list[tuple[str, float, float]]:
     """``(turn, total tilt, error)`` (deg) of one scene for every turn of :data:`TURNS` about both axes."""
     data = read_rest3d(root, scene, "sam3d")
-    A = np.eye(4)
-    A[:3, :3] = source_to_z_up("y")  # z up: the camera looks along +y, its x axis is x
+    A = make_pose(source_to_z_up("y"))  # z up: the camera looks along +y, its x axis is x
     meshes = {o.id: o.mesh.copy().apply_transform(A) for o in data.objects}
     up0 = estimate_up(meshes, [0.0, 0.0, 1.0], params).up
     out = []
@@ -48,7 +41,8 @@ def scene_turns(root: str, scene: str, params: LevelParams) -> list[tuple[str, f
         for deg in TURNS:
             R = Rotation.from_euler(axis, deg, degrees=True).as_matrix()
             truth = R @ up0
-            up = estimate_up(_turned(meshes, R), [0.0, 0.0, 1.0], params).up
+            turned = {k: m.copy().apply_transform(make_pose(R)) for k, m in meshes.items()}
+            up = estimate_up(turned, [0.0, 0.0, 1.0], params).up
             out.append((f"{name}{deg:+d}", angle_deg(truth, [0.0, 0.0, 1.0]), angle_deg(up, truth)))
     return out
 

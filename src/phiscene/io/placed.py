@@ -38,7 +38,7 @@ from phiscene.io import check_unit_scale
 from phiscene.levelling import LevelParams, UpEstimate, angle_deg, estimate_up, levelling_transform
 from phiscene.params import Params
 from phiscene.scene import Scene, SceneObject, check_world_bounds, load_scene, save_scene
-from phiscene.transforms import Y_UP_TO_Z_UP, quat_wxyz_to_matrix, rigidity_error
+from phiscene.transforms import Y_UP_TO_Z_UP, make_pose, quat_wxyz_to_matrix, rigidity_error
 from phiscene.walls import WallParams, estimate_walls
 
 log = logging.getLogger(__name__)
@@ -267,7 +267,7 @@ class Levelling:
 def level_objects(objects: list[PlacedObject], params: PlacedParams, camera: Camera | None = None) -> Levelling:
     """The levelling transform of placed objects: convention to z-up, estimated up to +z, the ground at z = 0."""
     A = source_to_z_up(params.up)
-    meshes = {o.id: o.mesh.copy().apply_transform(_h(A)) for o in objects}
+    meshes = {o.id: o.mesh.copy().apply_transform(make_pose(A)) for o in objects}
     estimate = estimate_up(meshes, [0.0, 0.0, 1.0], params.levelling) if params.level else None
     up = estimate.up if estimate is not None else np.array([0.0, 0.0, 1.0])
     if estimate is not None and estimate.tilt_deg > LARGE_TILT_DEG:
@@ -277,14 +277,8 @@ def level_objects(objects: list[PlacedObject], params: PlacedParams, camera: Cam
     forward = None if camera is None else A @ (np.asarray(camera.target, float) - np.asarray(camera.eye, float))
     parts = [np.asarray(m.vertices) for m in meshes.values()]
     T = levelling_transform(parts, up, forward, params.levelling.floor_band,
-                             params.levelling.floor_rest_deg) @ _h(A)
+                             params.levelling.floor_rest_deg) @ make_pose(A)
     return Levelling(T, estimate)
-
-
-def _h(R: np.ndarray) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3] = R
-    return T
 
 
 def import_placed(objects: list[PlacedObject], out_dir: str | Path, params: PlacedParams = PlacedParams(),
