@@ -27,6 +27,7 @@ from phiscene.config import (
     schema_sections,
     suite_generator,
 )
+from phiscene.io.source import SourceParams
 from phiscene.params import Params, nested_params
 from phiscene.topology import get_backend
 
@@ -348,6 +349,15 @@ def test_every_section_refers_to_its_class():
     assert suite["benchmark"]["$ref"] == f"#/$defs/{load_class(SECTIONS['benchmark']).__name__}"
     assert [alt["$ref"] for alt in suite["source"]["oneOf"]] == \
         [f"#/$defs/{load_class(spec).__name__}" for spec in SOURCE_PARAMS.values()]
+
+
+@pytest.mark.parametrize("kind", [k for k, spec in SOURCE_PARAMS.items() if issubclass(load_class(spec), SourceParams)])
+def test_a_source_class_is_registered_under_its_own_kind_and_refuses_another(kind):
+    cls = load_class(SOURCE_PARAMS[kind])
+    assert cls.KIND == kind and cls.from_dict({"root": "data"}).kind == kind
+    other = next(k for k in SOURCE_PARAMS if k != kind)
+    with pytest.raises(ValueError, match=f"^{cls._label} kind must be '{kind}', got '{other}'$"):
+        cls.from_dict({"root": "data", "kind": other})
 
 
 def test_default_config_passes_schema_and_classes():

@@ -22,7 +22,7 @@ from pathlib import Path
 from phiscene.errors import InputError
 from phiscene.io import finite_numbers
 from phiscene.io.placed import MESH_SUFFIXES, Camera, PlacedParams, import_placed, read_placed_dir
-from phiscene.params import Params
+from phiscene.io.source import SourceParams
 from phiscene.scene import Scene
 
 #: The optional files of a scene folder.
@@ -33,7 +33,7 @@ SCENE_NAME = re.compile(r"^[A-Za-z0-9_]+$")
 
 
 @dataclass(frozen=True)
-class PlacedSource(Params):
+class PlacedSource(SourceParams):
     """A suite of placed-mesh scenes (module docstring layout).
 
     Attributes
@@ -47,15 +47,10 @@ class PlacedSource(Params):
     """
 
     _label = "placed-mesh source"
+    KIND = "placed"
 
-    root: str
     kind: str = "placed"
     params: PlacedParams = field(default_factory=PlacedParams)
-
-    def check(self) -> None:
-        """Reject another kind (``ValueError``)."""
-        if self.kind != "placed":
-            raise ValueError(f"placed-mesh source kind must be 'placed', got {self.kind!r}")
 
 
 def scene_ids(root: str | Path) -> list[str]:

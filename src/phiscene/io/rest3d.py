@@ -37,7 +37,7 @@ from phiscene.io.placed import (
     placement_matrix,
     read_mesh,
 )
-from phiscene.params import Params
+from phiscene.io.source import SourceParams
 from phiscene.scene import Scene
 
 #: The variants of a REST3D scene folder that the ``real`` suites pair: raw SAM 3D Objects and REST3D's result.
@@ -52,7 +52,7 @@ GET_DATA = "git clone --branch gh-pages https://github.com/ShirleyMaxx/REST3D <r
 
 
 @dataclass(frozen=True)
-class Rest3dSource(Params):
+class Rest3dSource(SourceParams):
     """A REST3D source (``config.yaml`` ``suites.<suite>.source`` with ``kind: rest3d``).
 
     Attributes
@@ -69,16 +69,15 @@ class Rest3dSource(Params):
     """
 
     _label = "REST3D source"
+    KIND = "rest3d"
 
-    root: str
     kind: str = "rest3d"
     variant: str = "sam3d"
     placed: PlacedParams = field(default_factory=PlacedParams)
 
     def check(self) -> None:
         """Reject another kind or an unknown variant (``ValueError``)."""
-        if self.kind != "rest3d":
-            raise ValueError(f"REST3D source kind must be 'rest3d', got {self.kind!r}")
+        super().check()
         if self.variant not in ALL_VARIANTS:
             raise ValueError(f"REST3D variant must be one of {ALL_VARIANTS}, got {self.variant!r}")
 

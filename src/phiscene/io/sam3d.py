@@ -65,6 +65,7 @@ import numpy as np
 from phiscene.atomic import atomic_path, write_json
 from phiscene.errors import InputError
 from phiscene.io import check_unit_scale, finite_numbers
+from phiscene.io.source import SourceParams
 from phiscene.levelling import LevelParams, UpEstimate
 from phiscene.params import Params
 from phiscene.scene import Scene, SceneObject, load_scene, save_scene
@@ -543,7 +544,7 @@ def import_sam3d(in_dir: str | Path, out_dir: str | Path, floor: Floor | None = 
 
 # -- workflow source ------------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class Sam3dSource(Params):
+class Sam3dSource(SourceParams):
     """A suite of SAM 3D Objects runs (``config.yaml`` ``suites.<suite>.source`` with ``kind: sam3d``).
 
     ``root`` holds one folder per scene, each one run in the input layout of the module docstring
@@ -560,15 +561,10 @@ class Sam3dSource(Params):
     """
 
     _label = "SAM 3D source"
+    KIND = "sam3d"
 
-    root: str
     kind: str = "sam3d"
     params: Sam3dParams = field(default_factory=Sam3dParams)
-
-    def check(self) -> None:
-        """Reject another kind (``ValueError``)."""
-        if self.kind != "sam3d":
-            raise ValueError(f"SAM 3D source kind must be 'sam3d', got {self.kind!r}")
 
 
 def scene_ids(root: str | Path) -> list[str]:
