@@ -79,9 +79,8 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    (:func:`certify.closeness`), is taken (``closest``), with the reasons in the certificate. The final pose is always
    the outcome of free settling at normal settings: the object is never frozen where the
    simulator would not leave it. The one exception is an object mostly unseen in the photo (``hidden_share``):
-   instead of that fallback it is kept where it was put, in the photo's orientation, static and attached to the
-   ground (``hidden``), when something is beneath it, what it touches stays when released and the fallback ends no
-   nearer to the input.
+   instead of that fallback it is kept where it was put, static and attached to the ground (``hidden``), when
+   something is beneath it, what it touches stays when released and the fallback ends no nearer to the input.
 4. **Joint settling**. The sequentially grounded scene is released as a
    whole until every object is at rest (``joint_settle_frames``): a
    supporter is never tested under the load put on it later in the order.
@@ -293,9 +292,8 @@ class FaithfulParams(Params):
         Remedy ``hidden``: an object that no start held (it would take the ``closest`` fallback) and of which the
         photo's camera sees less than this share (:func:`phiscene.render.visible_shares` on the input scene: its
         pixels in the scene over its pixels alone) is kept where it was put, lowered onto what lies beneath it,
-        static, in the photo's orientation (the flush turn of its corrected pose, computed from the facets of its
-        guessed shape, undone), like an object fixed in place (``attached`` to the ground in the grounded scene: left
-        out of drift averages, counted with the attached objects); not when nothing is beneath it, when the placed
+        static, like an object fixed in place (``attached`` to the ground in the grounded scene: left out of
+        drift averages, counted with the attached objects); not when nothing is beneath it, when the placed
         objects it touches move when released with it static (:func:`~phiscene.assembly.settle.gives_way`: its
         convex pieces would shove them), or when the fallback's result is nearer to the input
         (:func:`certify.closeness` from the input, a fall below it counted: the corrected pose may have been carried

@@ -284,10 +284,7 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
         # when lowered), nothing is beneath it, or the placed objects it touches, released, do not stay (static,
         # it would shove them: its convex pieces may reach into them)
         mass(com)
-        # in the photo's orientation: the flush turn is a correction computed from its guessed shape's facets
-        unflushed = info["flush_angle"] > 0
-        kept = _unflushed(world, oid, pose, info, context, fp.contact_tol / 2) if unflushed else pose
-        kept = lowered_start(world, oid, kept, context, fp.contact_tol / 2)
+        kept = lowered_start(world, oid, pose, context, fp.contact_tol / 2)
         world.set_pose(oid, kept)
         near = touching()
         far = lambda p: certify.closeness(info["input"], p, info["com"], info["diag"], start=info["input"])  # noqa: E731
@@ -296,8 +293,6 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
         if near and far(kept) < far(best["result"].pose) and not (
                 carriers and gives_way(world, oid, carriers, fp.load_frames, fp.joint_tol, fp.joint_tol_deg, sp)[0]):
             rec["touching"] = near
-            if unflushed:
-                info["flush_angle"] = rec["flush_angle"] = 0.0
             moved, turned = window_motion(pose, kept)
             reason = "; ".join(f"{t['label']}: {t['why']}" for t in tried)
             rec.update(settle_frames=sum(t["frames"] for t in tried), settled=True, settle_remedy="hidden",
