@@ -23,7 +23,8 @@ all: $(STAMP)
 # 6 min 48 s with the install; 732 in 4 min 23 s after the MuJoCo logging commit of stop 59, 5 min 21 s with it;
 # 737 in 4 min 6 s at 2662a7b, 5 min 0 s with the install; 8 min 29 s at 58947fe beside a 2-job workflow run;
 # 745 in 4 min 20 s at a018814 in a fresh clone, 5 min 15 s with the install; 746 in 4 min 26 s at cea3455, 5 min
-# 26 s with the install).
+# 26 s with the install; 750 in 11 min 50 s at 6f4b412 in a fresh clone beside a 2-job workflow run, 13 min 19 s
+# with the install).
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n $(JOBS)
 
