@@ -41,7 +41,8 @@ def scene_turns(root: str, scene: str, params: LevelParams) -> list[tuple[str, f
         for deg in TURNS:
             R = Rotation.from_euler(axis, deg, degrees=True).as_matrix()
             truth = R @ up0
-            turned = {k: m.copy().apply_transform(make_pose(R)) for k, m in meshes.items()}
+            T = make_pose(R)
+            turned = {k: m.copy().apply_transform(T) for k, m in meshes.items()}
             up = estimate_up(turned, [0.0, 0.0, 1.0], params).up
             out.append((f"{name}{deg:+d}", angle_deg(truth, [0.0, 0.0, 1.0]), angle_deg(up, truth)))
     return out

@@ -47,7 +47,6 @@ class PlacedSource(SourceParams):
     """
 
     _label = "placed-mesh source"
-    KIND = "placed"
 
     kind: str = "placed"
     params: PlacedParams = field(default_factory=PlacedParams)

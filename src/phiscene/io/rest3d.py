@@ -69,7 +69,6 @@ class Rest3dSource(SourceParams):
     """
 
     _label = "REST3D source"
-    KIND = "rest3d"
 
     kind: str = "rest3d"
     variant: str = "sam3d"

@@ -561,7 +561,6 @@ class Sam3dSource(SourceParams):
     """
 
     _label = "SAM 3D source"
-    KIND = "sam3d"
 
     kind: str = "sam3d"
     params: Sam3dParams = field(default_factory=Sam3dParams)
