@@ -264,3 +264,22 @@ def test_a_textured_glb_loads_the_geometry_trimesh_reads_with_its_materials(tmp_
     loaded = load_mesh(path)
     np.testing.assert_array_equal(loaded.vertices, full.vertices)
     np.testing.assert_array_equal(loaded.faces, full.faces)
+
+
+def test_pieces_cut_to_their_vertex_cap_after_coacd_decimates_to_its_own():
+    # CoACD decimates its hulls to coacd_hull_vertices, then each piece keeps at most max_hull_vertices of its own
+    # vertices (fit_to_mesh's farthest-point subset): the same decomposition as with both caps at the higher value,
+    # each piece cut to a subset of that one's vertices, so inside it
+    table = table_mesh()
+    light = dict(mcts_iterations=10, mcts_nodes=8, resolution=300, max_hulls=4, max_faces=0, convex_tolerance=0.0,
+                 solid_resolution=0)
+    wide, route = decompose_route(table, ProxyParams(**light, max_hull_vertices=64))
+    assert route == "decomposed" and any(len(h) > 16 for h in wide)
+    cut, _ = decompose_route(table, ProxyParams(**light, max_hull_vertices=16, coacd_hull_vertices=64))
+    assert len(cut) == len(wide)
+    for small, big in zip(cut, wide):
+        assert 4 <= len(small) <= 16
+        rows = {tuple(np.round(v, 12)) for v in big}
+        assert all(tuple(np.round(v, 12)) in rows for v in small)
+    with pytest.raises(ValueError, match="coacd_hull_vertices"):
+        ProxyParams.from_dict({"coacd_hull_vertices": -1})
