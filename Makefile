@@ -24,7 +24,8 @@ all: $(STAMP)
 # 737 in 4 min 6 s at 2662a7b, 5 min 0 s with the install; 8 min 29 s at 58947fe beside a 2-job workflow run;
 # 745 in 4 min 20 s at a018814 in a fresh clone, 5 min 15 s with the install; 746 in 4 min 26 s at cea3455, 5 min
 # 26 s with the install; 750 in 11 min 50 s at 6f4b412 in a fresh clone beside a 2-job workflow run, 13 min 19 s
-# with the install; 749 in 5 min 42 s at b958bdb in a fresh clone, 7 min 17 s with the install).
+# with the install; 749 in 5 min 42 s at b958bdb in a fresh clone, 7 min 17 s with the install; 750 in 12 min 11 s
+# at ef32b2f in a fresh clone beside a 2-job workflow run, 13 min 31 s with the install).
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n $(JOBS)
 
