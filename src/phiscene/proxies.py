@@ -156,6 +156,11 @@ class ProxyParams(Params):
         text = json.dumps({**kept, "version": PROXY_VERSION}, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:12]
 
+    def decomposition_vertices(self) -> int:
+        """The vertex cap the decomposition and its route work with (``coacd_hull_vertices``, else
+        ``max_hull_vertices``), before each piece is cut to ``max_hull_vertices``."""
+        return self.coacd_hull_vertices or self.max_hull_vertices
+
     def refines(self) -> bool:
         """Whether a decomposition that hit its hull cap may be redone with more hulls."""
         return self.backend == "coacd" and self.refine_excess > 0 and self.max_hulls > 0 and \
@@ -292,12 +297,10 @@ def decompose_route(mesh: trimesh.Trimesh, params: ProxyParams) -> tuple[list[np
     """
     if params.backend == "convex":
         return [np.asarray(mesh.convex_hull.vertices, dtype=float)], "convex"
-    hulls, route = _routed(mesh, params, params.coacd_hull_vertices or params.max_hull_vertices)
-    if 0 < params.max_hull_vertices < max(len(h) for h in hulls):
-        # each piece cut to its final budget once its route is chosen: a coverage test on the cut pieces would
-        # reject the solid route for what the cut leaves uncovered
-        hulls = [cut_hull(h, params.max_hull_vertices) for h in hulls]
-    return hulls, route
+    hulls, route = _routed(mesh, params, params.decomposition_vertices())
+    # each piece cut to its final budget once its route is chosen: a coverage test on the cut pieces would reject
+    # the solid route for what the cut leaves uncovered
+    return [cut_hull(h, params.max_hull_vertices) for h in hulls], route
 
 
 def _routed(mesh: trimesh.Trimesh, params: ProxyParams, vertices: int) -> tuple[list[np.ndarray], str]:
@@ -475,7 +478,7 @@ def _decompose(mesh: trimesh.Trimesh, params: ProxyParams) -> list[np.ndarray]:
             preprocess_resolution=params.preprocess_resolution, resolution=params.resolution,
             mcts_nodes=params.mcts_nodes, mcts_iterations=params.mcts_iterations,
             mcts_max_depth=params.mcts_max_depth, decimate=True,
-            max_ch_vertex=params.coacd_hull_vertices or params.max_hull_vertices,
+            max_ch_vertex=params.decomposition_vertices(),
             seed=params.seed)
         hulls = [np.asarray(v, dtype=float) for v, _ in parts if len(v) >= 4]
     else:
