@@ -26,6 +26,7 @@ from phiscene.config import (
     scaling_settings,
     schema_sections,
     suite_generator,
+    suite_proxies,
 )
 from phiscene.io.source import SourceParams
 from phiscene.params import Params, nested_params
@@ -184,11 +185,58 @@ def test_a_suite_names_its_generator_and_an_unknown_one_is_refused():
     assert suite_generator(config, "foo") == "rooms" and suite_generator(config, "contact") == "contact"
 
 
-def test_the_heldout_config_passes_schema_and_classes():
-    config = deep_merge(CONFIG, yaml.safe_load((ROOT / "config/heldout.yaml").read_text()))
+@pytest.mark.parametrize("override", ["heldout", "real_more", "rest3d_baselines"])
+def test_the_override_configs_pass_schema_and_classes(override):
+    config = deep_merge(CONFIG, yaml.safe_load((ROOT / f"config/{override}.yaml").read_text()))
     check_config(config)
     jsonschema.validate(config, SCHEMA)
-    assert {suite_generator(config, s) for s in ("contact_f", "rooms_f")} == {"contact", "rooms"}
+    if override == "heldout":
+        assert {suite_generator(config, s) for s in ("contact_f", "rooms_f")} == {"contact", "rooms"}
+
+
+def test_a_suite_takes_a_named_proxy_profile_then_its_own_override():
+    """`proxies`, then `proxy_profiles.<name>`, then the suite's `proxies`, each deep-merged over the one before."""
+    config = copy.deepcopy(CONFIG)
+    config["proxies"] = {"max_hulls": 16, "seed": 0, "threshold": 0.08}
+    config["proxy_profiles"]["light"] = {"max_hulls": 8, "mcts_iterations": 10}
+    config["suites"] |= {"a": {"n_scenes": 1, "generator": "contact", "proxy_profile": "light",
+                              "proxies": {"mcts_iterations": 5}},
+                        "b": {"n_scenes": 1, "generator": "contact", "proxy_profile": "light"},
+                        "c": {"n_scenes": 1, "generator": "contact"}}
+    check_config(config)
+    jsonschema.validate(config, SCHEMA)
+    assert suite_proxies(config, "a") == {"max_hulls": 8, "seed": 0, "threshold": 0.08, "mcts_iterations": 5}
+    assert suite_proxies(config, "b") == {"max_hulls": 8, "seed": 0, "threshold": 0.08, "mcts_iterations": 10}
+    assert suite_proxies(config, "c") == suite_proxies(config) == config["proxies"]
+    assert config["proxy_profiles"]["light"] == {"max_hulls": 8, "mcts_iterations": 10}  # nothing modified
+
+    config["suites"]["b"]["proxy_profile"] = "lite"
+    with pytest.raises(ConfigError, match=r"^config: suites.b.proxy_profile: no proxy profile 'lite' \(known: light, "
+                                          r"reconstruction\)$"):
+        check_config(config)
+    config["suites"]["b"]["proxy_profile"] = "light"
+    config["proxy_profiles"]["light"]["max_hull"] = 8
+    with pytest.raises(ConfigError, match=r"^config: proxy_profiles.light: unknown key 'max_hull' \(known: "):
+        check_config(config)
+    with pytest.raises(jsonschema.ValidationError):  # the schema says the same
+        jsonschema.validate(config, SCHEMA)
+    with pytest.raises(ConfigError, match=r"^config: suites.a.proxy_profile: no proxy profile 'light' \(known: none"):
+        suite_proxies({"proxies": {}, "suites": {"a": {"proxy_profile": "light"}}}, "a")
+
+
+def test_the_shipped_reconstruction_suites_share_one_proxy_profile():
+    """Every suite of reconstructed meshes in the shipped configs (real data, or built with the foundation-model
+    degradation) gets its proxies from one named profile rather than a copy of its settings."""
+    for override in (None, "heldout", "real_more", "rest3d_baselines"):
+        config = CONFIG if override is None else deep_merge(
+            CONFIG, yaml.safe_load((ROOT / f"config/{override}.yaml").read_text()))
+        for name, spec in config["suites"].items():
+            reconstructed = "source" in spec and spec["source"]["kind"] != "front3d" or \
+                (spec.get("benchmark") or {}).get("degrade", {}).get("kind") == "foundation"
+            if reconstructed:
+                assert spec.get("proxy_profile") == "reconstruction" and "proxies" not in spec, (override, name)
+                assert suite_proxies(config, name) == deep_merge(config["proxies"],
+                                                                 config["proxy_profiles"]["reconstruction"])
 
 
 # ---------------------------------------------------------------------------------------------------- checks
@@ -233,7 +281,7 @@ def test_value_rules_of_the_classes_run_too():
                                           r"of always, off_support, got 'never'"):
         check_config(config)
     config = copy.deepcopy(CONFIG)
-    config["suites"]["real"]["proxies"]["refine_max_hulls"] = -1
+    config["suites"]["real"]["proxies"] = {"refine_max_hulls": -1}
     with pytest.raises(ConfigError, match=r"^config: suites.real.proxies: .*refine_max_hulls must be >= 0"):
         check_config(config)
     with pytest.raises(jsonschema.ValidationError):  # the schema says the same

@@ -86,12 +86,14 @@ RECONSTRUCTION_FACES = 10_000
 
 def _reconstruction_hint(cfg: dict, scene_path: Path) -> str | None:
     """A note for ``phiscene ground`` without ``--suite`` on a scene of reconstructed meshes: the config's suites
-    of real data with a ``proxies`` override (the ``real`` suite's lighter CoACD search), or ``None``."""
+    of real data with proxy settings of their own (a ``proxy_profile`` or a ``proxies`` override: the ``real``
+    suite's lighter CoACD search), or ``None``."""
     import numpy as np
 
     from phiscene.scene import load_scene
 
-    suites = [name for name, s in (cfg.get("suites") or {}).items() if "source" in s and "proxies" in s]
+    suites = [name for name, s in (cfg.get("suites") or {}).items()
+              if "source" in s and ("proxies" in s or "proxy_profile" in s)]
     if not suites:
         return None
     faces = float(np.median([len(o.mesh().faces) for o in load_scene(scene_path).objects]))

@@ -7,7 +7,8 @@ names them in one place and offers the three things the workflow needs while it 
 - :func:`deep_merge`: a method's ``assembly:`` override (or a suite's ``benchmark:`` override) merged
   over the defaults key by key at every depth, so ``assembly: {penetration_params: {eps: 0.01}}``
   keeps the other ``penetration_params`` keys of ``config.yaml``;
-- :func:`method_assembly` (:func:`job_assembly`) and :func:`bench_settings`: the merged mappings that jobs receive;
+- :func:`method_assembly` (:func:`job_assembly`), :func:`bench_settings` and :func:`suite_proxies` (a suite's
+  named ``proxy_profiles`` entry and its own override over ``proxies``): the merged mappings that jobs receive;
 - :func:`check_config`: every parameter class run on its section (and on each merged override), so
   ``snakemake -n`` rejects a misspelled key before any job runs, with one line naming the config path
   and the key, e.g. ``config: assembly.penetration_params: unknown key 'epsilon' (known: backtrack_steps,
@@ -17,6 +18,8 @@ Sections and their classes (``module:Class``, imported when a config is checked)
 
 :data:`SECTIONS`
     Fixed paths: ``proxies``, ``sim``, ``assembly``, ``benchmark``, ``metrics.<name>``, ``export.demo``.
+``proxy_profiles.<name>``
+    :class:`~phiscene.proxies.ProxyParams`, merged over ``proxies`` (:func:`suite_proxies`).
 :func:`method_params`
     ``methods.<name>.params`` by the method's ``kind``.
 :data:`SOURCE_PARAMS`
@@ -41,7 +44,7 @@ from phiscene.params import nested_params
 
 __all__ = ["METHOD_PARAMS", "SECTIONS", "SOURCE_PARAMS", "ConfigError", "bench_settings", "check_config",
            "check_params", "deep_merge", "job_assembly", "load_class", "method_assembly", "method_params",
-           "packaged_config_path", "schema_sections", "suite_generator", "suite_proxies"]
+           "packaged_config_path", "proxy_profile", "schema_sections", "suite_generator", "suite_proxies"]
 
 def packaged_config_path() -> Path:
     """The workflow's ``config/config.yaml`` as shipped with the package (``phiscene/defaults/config.yaml``, a link
@@ -149,13 +152,40 @@ def job_assembly(config: Mapping[str, Any], method: str) -> dict:
     return merged
 
 
+def proxy_profile(config: Mapping[str, Any], name: str, where: str) -> Mapping[str, Any]:
+    """The named proxy settings ``proxy_profiles.<name>`` (a partial ``proxies`` section).
+
+    Raises
+    ------
+    ConfigError
+        ``config: <where>: no proxy profile 'name' (known: ...)``.
+    """
+    profiles = _mapping(config.get("proxy_profiles"), "proxy_profiles")
+    if name not in profiles:
+        raise ConfigError(f"config: {where}: no proxy profile {name!r} (known: "
+                          f"{', '.join(sorted(profiles)) or 'none; define it under proxy_profiles'})")
+    return _mapping(profiles[name], f"proxy_profiles.{name}")
+
+
 def suite_proxies(config: Mapping[str, Any], suite: str | None = None) -> dict:
     """The proxy settings of a suite's scenes (the params of the workflow's ``proxies`` rule).
 
-    ``proxies`` with the suite's ``proxies`` override deep-merged over it (the ``real`` suite's lighter
-    CoACD search for 30k-face reconstructions); ``suite=None`` gives ``proxies`` alone.
+    ``proxies``, then the named profile the suite takes (``suites.<suite>.proxy_profile``, a key of
+    ``proxy_profiles``: ``reconstruction``, the lighter CoACD search made for 30k-face reconstructions), then the
+    suite's own ``proxies`` override, each deep-merged over the one before; ``suite=None`` gives ``proxies`` alone.
+
+    Raises
+    ------
+    ConfigError
+        The suite names a profile that ``proxy_profiles`` does not define.
     """
-    return deep_merge(config.get("proxies"), (config["suites"][suite].get("proxies") if suite else None))
+    merged = deep_merge(config.get("proxies"), None)
+    if suite is None:
+        return merged
+    spec = config["suites"][suite]
+    if spec.get("proxy_profile") is not None:
+        merged = deep_merge(merged, proxy_profile(config, str(spec["proxy_profile"]), f"suites.{suite}.proxy_profile"))
+    return deep_merge(merged, spec.get("proxies"))
 
 
 def suite_generator(config: Mapping[str, Any], suite: str) -> str:
@@ -302,13 +332,17 @@ def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -
         if present:
             check_params(load_class(spec), value, path)
 
+    for name, profile in _mapping(config.get("proxy_profiles"), "proxy_profiles").items():
+        check_params(load_class(SECTIONS["proxies"]), deep_merge(config.get("proxies"), _mapping(
+            profile, f"proxy_profiles.{name}")), f"proxy_profiles.{name}")
+
     from phiscene.bench.build import BenchParams, with_suite_defaults
 
     for suite, spec in _mapping(config.get("suites"), "suites").items():
         spec = _mapping(spec, f"suites.{suite}")
-        if "proxies" in spec:
-            check_params(load_class(SECTIONS["proxies"]), deep_merge(config.get("proxies") or {}, spec["proxies"]),
-                         f"suites.{suite}.proxies")
+        if "proxies" in spec or "proxy_profile" in spec:
+            where = f"suites.{suite}.proxies" if "proxies" in spec else f"suites.{suite}.proxy_profile"
+            check_params(load_class(SECTIONS["proxies"]), suite_proxies(config, suite), where)
         if "source" in spec:
             if "generator" in spec:
                 raise ConfigError(f"config: suites.{suite}: `generator` and `source` exclude each other (a suite "
