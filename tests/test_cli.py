@@ -96,6 +96,43 @@ def test_ground_command_uses_the_method_settings(tmp_path):
     assert "'initial'" in bad.stderr and "phi_scene_paper" in bad.stderr
 
 
+def test_config_given_twice_is_merged_and_a_bad_setting_is_one_line(tmp_path):
+    """`--config BASE --config OVERRIDE` merges the override over the base (a suite naming a proxy profile of the
+    base: backend convex, route `convex`, where the base's own settings take the box's single hull); an override file
+    alone, or a misspelled or out-of-range setting, is refused in one line naming the file and the setting, before
+    anything is written."""
+    cube = save_mesh(trimesh.creation.box([0.1, 0.1, 0.1]), tmp_path / "meshes/cube.glb")
+    save_scene(Scene([SceneObject("cube", cube, make_pose(translation=[0, 0, 0.05]))]), tmp_path / "in/scene.json")
+    base, over = tmp_path / "base.yaml", tmp_path / "over.yaml"
+    base.write_text(f"cache_dir: {tmp_path / 'cache'}\nproxy_profiles: {{plain: {{backend: convex}}}}\n")
+    over.write_text("suites: {mine: {n_scenes: 1, proxy_profile: plain}}\n")
+    routes = {}
+    for name, extra in (("own", ["--config", str(base)]), ("profile", ["--config", str(base), "--config", str(over),
+                                                                      "--suite", "mine"])):
+        res = phiscene("ground", str(tmp_path / "in"), str(tmp_path / name), *extra, cwd=tmp_path)
+        assert res.returncode == 0, res.stderr
+        routes[name] = read_proxies(tmp_path / name / "proxies.npz")["cube"].meta["route"]
+    assert routes == {"own": "single_hull", "profile": "convex"}
+
+    res = phiscene("ground", str(tmp_path / "in"), str(tmp_path / "bad"), "--config", str(over), "--suite", "mine",
+                   cwd=tmp_path)
+    assert res.returncode == 1 and "Traceback" not in res.stderr and res.stderr.count("\n") == 1, res.stderr
+    assert f"{over}: config: suites.mine.proxy_profile: no proxy profile 'plain'" in res.stderr
+    assert "--config config/config.yaml --config FILE" in res.stderr
+    bad = tmp_path / "bad.yaml"
+    for text, message in (("proxies: {max_hull: 3}", f"{base} + {bad}: config: proxies: unknown key 'max_hull'"),
+                          ("assembly: {faithful: {joint_tol: -1}}", f"{base} + {bad}: config: assembly.faithful: "
+                                                                    "faithful parameter 'joint_tol' must be >= 0"),
+                          ("- proxies", f"{bad}: not a config (a YAML mapping of sections)")):
+        bad.write_text(text + "\n")
+        for command in (["ground", str(tmp_path / "in"), str(tmp_path / "bad")],
+                        ["metrics", str(tmp_path / "in/scene.json")]):
+            res = phiscene(*command, "--config", str(base), "--config", str(bad), cwd=tmp_path)
+            assert res.returncode == 1 and "Traceback" not in res.stderr, res.stderr
+            assert res.stderr.count("\n") == 1 and message in res.stderr, res.stderr
+    assert not (tmp_path / "bad").exists()
+
+
 def test_ground_command_without_a_config_grounds_as_the_workflows_phi_scene(tmp_path):
     """Run where there is no config/config.yaml, `phiscene ground` reads the workflow's own config as shipped with
     the package (the faithful `phi_scene` method, not the paper's loop of the parameter defaults), says so, and

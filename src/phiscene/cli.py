@@ -29,28 +29,53 @@ from phiscene.errors import PhisceneError
 log = logging.getLogger("phiscene")
 
 
-def _config(path: str | None) -> dict:
+def _config(paths: list[str] | None) -> dict:
+    """The config of ``--config`` (given more than once: each file deep-merged over the ones before, as Snakemake's
+    ``--configfile`` over the workflow's config), its plugins loaded and the sections the stages read checked.
+
+    Raises
+    ------
+    PhisceneError
+        A file is missing or not YAML, a plugin does not import, or a setting is bad: one line naming the file(s)
+        and the setting's config path.
+    """
     import yaml
 
-    p = Path(path) if path else Path("config/config.yaml")
+    from phiscene.config import ConfigError, check_stage_config, deep_merge
+    from phiscene.plugins import load_plugins
+
+    files = [Path(p) for p in paths] if paths else [Path("config/config.yaml")]
     shipped = False
-    if not p.is_file():
-        if path:
-            raise PhisceneError(f"{p}: config file not found")
+    if not paths and not files[0].is_file():
         from phiscene.config import packaged_config_path
 
-        p, shipped = packaged_config_path(), True
-        if not p.is_file():
-            raise PhisceneError(f"no config/config.yaml in {Path.cwd()} and none shipped with phiscene ({p}): "
+        files, shipped = [packaged_config_path()], True
+        if not files[0].is_file():
+            raise PhisceneError(f"no config/config.yaml in {Path.cwd()} and none shipped with phiscene ({files[0]}): "
                                 "pass --config FILE")
         print(f"phiscene: no config/config.yaml in {Path.cwd()}; using the default config shipped with phiscene "
-              f"({p}; --config FILE for another)", file=sys.stderr)
-    try:
-        cfg = yaml.safe_load(p.read_text()) or {}
-    except yaml.YAMLError as exc:
-        raise PhisceneError(f"{p}: not valid YAML ({str(exc).splitlines()[0]})") from None
+              f"({files[0]}; --config FILE for another)", file=sys.stderr)
+    cfg: dict = {}
+    for p in files:
+        if not p.is_file():
+            raise PhisceneError(f"{p}: config file not found")
+        try:
+            data = yaml.safe_load(p.read_text()) or {}
+        except yaml.YAMLError as exc:
+            raise PhisceneError(f"{p}: not valid YAML ({str(exc).splitlines()[0]})") from None
+        if not isinstance(data, dict):
+            raise PhisceneError(f"{p}: not a config (a YAML mapping of sections), got {type(data).__name__}")
+        cfg = deep_merge(cfg, data)
     if shipped:
         cfg.pop("cache_dir", None)  # the workflow's results/cache, relative to a repository: beside the outputs here
+    label = " + ".join(map(str, files))
+    load_plugins(cfg.get("plugins") or [])  # a PluginError names the module
+    try:
+        check_stage_config(cfg)
+    except ConfigError as exc:
+        hint = ("; an override file goes after the config it overrides: --config config/config.yaml --config FILE"
+                if len(files) == 1 and "no proxy profile" in str(exc) else "")
+        raise PhisceneError(f"{label}: {exc}{hint}") from None
     return cfg
 
 
@@ -425,7 +450,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.set_defaults(func=cmd_export)
 
     for p in (g, m, b, e):
-        p.add_argument("--config", help="workflow config YAML (default: config/config.yaml if present)")
+        p.add_argument("--config", action="append", metavar="FILE",
+                       help="workflow config YAML (default: config/config.yaml if present); again: a file merged "
+                            "over it, as snakemake --configfile")
         p.add_argument("--cache-dir", help="cache folder (default: the config's cache_dir)")
     return ap
 

@@ -42,9 +42,10 @@ from typing import Any
 
 from phiscene.params import nested_params
 
-__all__ = ["METHOD_PARAMS", "SECTIONS", "SOURCE_PARAMS", "ConfigError", "bench_settings", "check_config",
-           "check_params", "deep_merge", "job_assembly", "load_class", "method_assembly", "method_params",
-           "packaged_config_path", "proxy_profile", "schema_sections", "suite_generator", "suite_proxies"]
+__all__ = ["METHOD_PARAMS", "SECTIONS", "SOURCE_PARAMS", "STAGE_SECTIONS", "ConfigError", "bench_settings",
+           "check_config", "check_params", "check_stage_config", "deep_merge", "job_assembly", "load_class",
+           "method_assembly", "method_params", "packaged_config_path", "proxy_profile", "schema_sections",
+           "suite_generator", "suite_proxies"]
 
 def packaged_config_path() -> Path:
     """The workflow's ``config/config.yaml`` as shipped with the package (``phiscene/defaults/config.yaml``, a link
@@ -301,13 +302,60 @@ def schema_sections(schema_path: str | Path) -> list[str]:
         return sorted(yaml.safe_load(f)["properties"])
 
 
+#: The fixed sections that grounding, measuring and exporting one scene read (:func:`check_stage_config`).
+STAGE_SECTIONS = ("proxies", "sim", "assembly", "metrics.physical", "metrics.mujoco", "topology.attached",
+                  "export.demo")
+
+
+def check_stage_config(config: Mapping[str, Any]) -> None:
+    """The part of :func:`check_config` that the ``phiscene`` command's stages read; raise one :class:`ConfigError`.
+
+    Checked: the :data:`STAGE_SECTIONS`, every ``proxy_profiles`` entry and every suite's proxy settings
+    (:func:`suite_proxies`), ``topology.<backend>`` with the backend's class and every ``phi_scene``-kind method's
+    merged ``assembly``. Not the benchmark generators, baselines, real-data sources or tables, whose classes
+    import what grounding one scene does not need.
+
+    Raises
+    ------
+    ConfigError
+        One line: ``config: <path>: <problem>``.
+    """
+    config = _mapping(config, "(top level)")
+    for path in STAGE_SECTIONS:
+        present, value = _section(config, path)
+        if present:
+            check_params(load_class(SECTIONS[path]), value, path)
+    for name, profile in _mapping(config.get("proxy_profiles"), "proxy_profiles").items():
+        check_params(load_class(SECTIONS["proxies"]), deep_merge(config.get("proxies"), _mapping(
+            profile, f"proxy_profiles.{name}")), f"proxy_profiles.{name}")
+    for suite, spec in _mapping(config.get("suites"), "suites").items():
+        spec = _mapping(spec, f"suites.{suite}")
+        if "proxies" in spec or "proxy_profile" in spec:
+            where = f"suites.{suite}.proxies" if "proxies" in spec else f"suites.{suite}.proxy_profile"
+            check_params(load_class(SECTIONS["proxies"]), suite_proxies(config, suite), where)
+
+    from phiscene.topology import backend_names, get_backend
+
+    for backend, settings in _mapping(config.get("topology"), "topology").items():
+        if backend == "attached":  # the attachment decision every backend runs (SECTIONS)
+            continue
+        if backend not in backend_names():
+            raise ConfigError(f"config: topology: unknown backend {backend!r} (known: {', '.join(backend_names())})")
+        check_params(get_backend(backend).params_cls, settings, f"topology.{backend}")
+    for name, spec in _mapping(config.get("methods"), "methods").items():
+        spec = _mapping(spec, f"methods.{name}")
+        if spec.get("kind") == "phi_scene":
+            _mapping(spec.get("assembly"), f"methods.{name}.assembly")  # a non-mapping override: one line too
+            check_params(load_class(SECTIONS["assembly"]), method_assembly(config, name), f"methods.{name}.assembly")
+
+
 def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -> None:
     """Run every parameter class on its config section; raise one :class:`ConfigError` for the first bad one.
 
-    Checked: unknown top-level sections (when ``sections`` is given), the fixed :data:`SECTIONS`,
-    every suite's merged benchmark settings (:func:`bench_settings`) and real-data ``source``,
-    ``topology.<backend>`` with the backend's class, every ``phi_scene``-kind method's merged
-    ``assembly`` (:func:`method_assembly`) and every baseline's ``params`` (:func:`method_params`).
+    Checked: unknown top-level sections (when ``sections`` is given), the fixed :data:`SECTIONS`, the proxy
+    profiles and settings, topology backends and ``phi_scene``-kind methods of :func:`check_stage_config`,
+    every suite's merged benchmark settings (:func:`bench_settings`) and real-data ``source``, every baseline's
+    ``params`` (:func:`method_params`) and the tables (:func:`check_tables`).
 
     Parameters
     ----------
@@ -329,20 +377,14 @@ def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -
             raise ConfigError(f"config: unknown section {unknown[0]!r} (known: {', '.join(sorted(sections))})")
     for path, spec in SECTIONS.items():
         present, value = _section(config, path)
-        if present:
+        if present and path not in STAGE_SECTIONS:
             check_params(load_class(spec), value, path)
-
-    for name, profile in _mapping(config.get("proxy_profiles"), "proxy_profiles").items():
-        check_params(load_class(SECTIONS["proxies"]), deep_merge(config.get("proxies"), _mapping(
-            profile, f"proxy_profiles.{name}")), f"proxy_profiles.{name}")
+    check_stage_config(config)
 
     from phiscene.bench.build import BenchParams, with_suite_defaults
 
     for suite, spec in _mapping(config.get("suites"), "suites").items():
         spec = _mapping(spec, f"suites.{suite}")
-        if "proxies" in spec or "proxy_profile" in spec:
-            where = f"suites.{suite}.proxies" if "proxies" in spec else f"suites.{suite}.proxy_profile"
-            check_params(load_class(SECTIONS["proxies"]), suite_proxies(config, suite), where)
         if "source" in spec:
             if "generator" in spec:
                 raise ConfigError(f"config: suites.{suite}: `generator` and `source` exclude each other (a suite "
@@ -359,22 +401,10 @@ def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -
             merged = with_suite_defaults(generator, bench_settings(config, suite))
             check_params(BenchParams, merged, f"suites.{suite}.benchmark")
 
-    from phiscene.topology import backend_names, get_backend
-
-    for backend, settings in _mapping(config.get("topology"), "topology").items():
-        if backend == "attached":  # the attachment decision every backend runs (SECTIONS)
-            continue
-        if backend not in backend_names():
-            raise ConfigError(f"config: topology: unknown backend {backend!r} (known: {', '.join(backend_names())})")
-        check_params(get_backend(backend).params_cls, settings, f"topology.{backend}")
-
     for name, spec in _mapping(config.get("methods"), "methods").items():
         spec = _mapping(spec, f"methods.{name}")
         kind = spec.get("kind")
-        if kind == "phi_scene":
-            _mapping(spec.get("assembly"), f"methods.{name}.assembly")  # a non-mapping override: one line too
-            check_params(load_class(SECTIONS["assembly"]), method_assembly(config, name), f"methods.{name}.assembly")
-        elif kind in method_params():
+        if kind != "phi_scene" and kind in method_params():
             check_params(method_params()[kind], spec.get("params"), f"methods.{name}.params")
             from phiscene.baselines.registry import BASELINES
 
