@@ -292,3 +292,18 @@ def test_ground_names_the_reconstruction_suite_for_reconstructed_meshes(tmp_path
     assert hint is not None and "--suite real" in hint and "20,480 faces" in hint
     assert _reconstruction_hint(cfg, tmp_path / "clean/scene.json") is None
     assert _reconstruction_hint({"proxies": {}}, tmp_path / "scanned/scene.json") is None
+
+
+def test_bench_command_refuses_a_bad_benchmark_setting_in_one_line(tmp_path):
+    """A misspelled benchmark key, global or in the suite's override: one line naming the file and the setting's
+    path, no traceback, nothing built."""
+    cfg = tmp_path / "c.yaml"
+    for text, path in (("suites: {contact: {n_scenes: 1}}\nbenchmark: {n_objectz: [3, 4]}",
+                        "config: benchmark: unknown key 'n_objectz'"),
+                       ("suites: {contact: {n_scenes: 1, benchmark: {gt: {settle_second: 1}}}}",
+                        "config: suites.contact.benchmark.gt: unknown key 'settle_second'")):
+        cfg.write_text(text + "\n")
+        res = phiscene("bench", str(tmp_path / "out"), "--suite", "contact", "--config", str(cfg), cwd=tmp_path)
+        assert res.returncode == 1 and "Traceback" not in res.stderr and res.stderr.count("\n") == 1, res.stderr
+        assert f"{cfg}: {path}" in res.stderr, res.stderr
+    assert not (tmp_path / "out").exists()

@@ -29,9 +29,10 @@ from phiscene.errors import PhisceneError
 log = logging.getLogger("phiscene")
 
 
-def _config(paths: list[str] | None) -> dict:
+def _config(paths: list[str] | None, bench_suite: str | None = None) -> dict:
     """The config of ``--config`` (given more than once: each file deep-merged over the ones before, as Snakemake's
-    ``--configfile`` over the workflow's config), its plugins loaded and the sections the stages read checked.
+    ``--configfile`` over the workflow's config), its plugins loaded and the sections the stages read checked
+    (with ``bench_suite``, also that suite's benchmark settings, :func:`_bench_settings`).
 
     Raises
     ------
@@ -72,11 +73,29 @@ def _config(paths: list[str] | None) -> dict:
     load_plugins(cfg.get("plugins") or [])  # a PluginError names the module
     try:
         check_stage_config(cfg)
+        if bench_suite is not None:
+            _check_bench(cfg, bench_suite)
     except ConfigError as exc:
         hint = ("; an override file goes after the config it overrides: --config config/config.yaml --config FILE"
                 if len(files) == 1 and "no proxy profile" in str(exc) else "")
         raise PhisceneError(f"{label}: {exc}{hint}") from None
     return cfg
+
+
+def _check_bench(cfg: dict, suite: str) -> None:
+    """The benchmark settings ``phiscene bench --suite`` builds with: ``benchmark``, then the suite's merged over it
+    and completed by its generator's defaults (``ConfigError`` naming the setting; an unknown suite or one that no
+    generator builds is left to :func:`cmd_bench`)."""
+    from phiscene.bench.build import TEMPLATES, BenchParams, with_suite_defaults
+    from phiscene.config import bench_settings, check_params
+
+    check_params(BenchParams, cfg.get("benchmark"), "benchmark")
+    spec = (cfg.get("suites") or {}).get(suite)
+    if not isinstance(spec, dict) or "source" in spec or spec.get("generator", suite) not in TEMPLATES:
+        return
+    check_params(BenchParams, spec.get("benchmark"), f"suites.{suite}.benchmark")
+    check_params(BenchParams, with_suite_defaults(spec.get("generator", suite), bench_settings(cfg, suite)),
+                 f"suites.{suite}.benchmark")
 
 
 def _known_suite(cfg: dict, suite: str) -> None:
@@ -208,7 +227,7 @@ def cmd_bench(args: argparse.Namespace) -> None:
     from phiscene.bench.build import TEMPLATES, build_scene
     from phiscene.config import ConfigError, suite_generator
 
-    cfg = _config(args.config)
+    cfg = _config(args.config, bench_suite=args.suite)
     params = _bench_settings(cfg, args.suite)
     cache = Path(args.cache_dir or cfg.get("cache_dir", Path(args.out_dir) / "cache"))
     try:
