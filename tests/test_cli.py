@@ -107,12 +107,17 @@ def test_config_given_twice_is_merged_and_a_bad_setting_is_one_line(tmp_path):
     base.write_text(f"cache_dir: {tmp_path / 'cache'}\nproxy_profiles: {{plain: {{backend: convex}}}}\n")
     over.write_text("suites: {mine: {n_scenes: 1, proxy_profile: plain}}\n")
     routes = {}
-    for name, extra in (("own", ["--config", str(base)]), ("profile", ["--config", str(base), "--config", str(over),
-                                                                      "--suite", "mine"])):
+    for name, extra in (("own", ["--config", str(base)]),
+                        ("suite", ["--config", str(base), "--config", str(over), "--suite", "mine"]),
+                        ("profile", ["--config", str(base), "--proxy-profile", "plain"])):
         res = phiscene("ground", str(tmp_path / "in"), str(tmp_path / name), *extra, cwd=tmp_path)
         assert res.returncode == 0, res.stderr
         routes[name] = read_proxies(tmp_path / name / "proxies.npz")["cube"].meta["route"]
-    assert routes == {"own": "single_hull", "profile": "convex"}
+    assert routes == {"own": "single_hull", "suite": "convex", "profile": "convex"}
+    res = phiscene("ground", str(tmp_path / "in"), str(tmp_path / "bad"), "--config", str(base), "--proxy-profile",
+                   "plane", cwd=tmp_path)
+    assert res.returncode == 1 and res.stderr.strip() == ("phiscene: error: --proxy-profile: no proxy profile "
+                                                          "'plane' (known: plain)"), res.stderr
 
     res = phiscene("ground", str(tmp_path / "in"), str(tmp_path / "bad"), "--config", str(over), "--suite", "mine",
                    cwd=tmp_path)
@@ -289,7 +294,7 @@ def test_ground_names_the_reconstruction_suite_for_reconstructed_meshes(tmp_path
         save_scene(Scene([SceneObject(f"o{k}", m, make_pose(translation=[0.3 * k, 0, 0.05]))
                           for k, m in enumerate(meshes)]), tmp_path / f"{name}/scene.json")
     hint = _reconstruction_hint(cfg, tmp_path / "scanned/scene.json")
-    assert hint is not None and "--suite real" in hint and "20,480 faces" in hint
+    assert hint is not None and "--proxy-profile reconstruction (or --suite real)" in hint and "20,480 faces" in hint
     assert _reconstruction_hint(cfg, tmp_path / "clean/scene.json") is None
     assert _reconstruction_hint({"proxies": {}}, tmp_path / "scanned/scene.json") is None
 

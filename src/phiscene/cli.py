@@ -113,10 +113,16 @@ def _bench_settings(cfg: dict, suite: str) -> dict:
     return bench_settings(cfg, suite)
 
 
-def _proxy_settings(cfg: dict, suite: str | None) -> dict:
-    """The config's proxy settings, with ``suite``'s override when one is named (as the workflow uses them)."""
-    from phiscene.config import suite_proxies
+def _proxy_settings(cfg: dict, suite: str | None, profile: str | None = None) -> dict:
+    """The config's proxy settings: with ``suite``, that suite's (its profile and override, as the workflow uses
+    them); with ``profile``, the named ``proxy_profiles`` entry over the global section."""
+    from phiscene.config import ConfigError, deep_merge, proxy_profile, suite_proxies
 
+    if profile is not None:
+        try:
+            return deep_merge(cfg.get("proxies"), proxy_profile(cfg, profile, "--proxy-profile"))
+        except ConfigError as exc:
+            raise PhisceneError(str(exc).removeprefix("config: ")) from None
     if suite is not None:
         _known_suite(cfg, suite)
     return suite_proxies(cfg, suite)
@@ -136,15 +142,17 @@ def _reconstruction_hint(cfg: dict, scene_path: Path) -> str | None:
 
     from phiscene.scene import load_scene
 
-    suites = [name for name, s in (cfg.get("suites") or {}).items()
-              if "source" in s and ("proxies" in s or "proxy_profile" in s)]
+    suites = {name: s.get("proxy_profile") for name, s in (cfg.get("suites") or {}).items()
+              if "source" in s and ("proxies" in s or "proxy_profile" in s)}
     if not suites:
         return None
     faces = float(np.median([len(o.mesh().faces) for o in load_scene(scene_path).objects]))
     if faces <= RECONSTRUCTION_FACES:
         return None
+    suite, profile = next(iter(suites.items()))
+    option = f"--proxy-profile {profile} (or --suite {suite})" if profile else f"--suite {suite}"
     return (f"note: {scene_path}: its meshes are reconstructions (median {faces:,.0f} faces), decomposed with the "
-            f"config's global proxy settings; --suite {suites[0]} takes the lighter CoACD search made for them "
+            f"config's global proxy settings; {option} takes the lighter CoACD search made for them "
             f"(README 'The phiscene command')")
 
 
@@ -175,8 +183,8 @@ def cmd_ground(args: argparse.Namespace) -> None:
 
         assembly = method_assembly(cfg, args.method)
         backend = args.topology or methods[args.method].get("topology", "geometric")
-    proxy_settings = _proxy_settings(cfg, args.suite)
-    hint = None if args.suite is not None else _reconstruction_hint(cfg, scene)
+    proxy_settings = _proxy_settings(cfg, args.suite, args.proxy_profile)
+    hint = None if args.suite is not None or args.proxy_profile else _reconstruction_hint(cfg, scene)
     if hint:
         print(hint, file=sys.stderr, flush=True)
     given = Path(args.given) if args.given else scene.parent.parent / "gt" / "topology.json"
@@ -215,7 +223,7 @@ def cmd_metrics(args: argparse.Namespace) -> None:
     scene = _scene_file(Path(args.scene))
     cache = Path(args.cache_dir or cfg.get("cache_dir", Path(tempfile.gettempdir()) / "phiscene-cache"))
     with tempfile.TemporaryDirectory() as tmp:
-        pipeline.run_proxies(scene, Path(tmp) / "p.npz", _proxy_settings(cfg, args.suite), cache)
+        pipeline.run_proxies(scene, Path(tmp) / "p.npz", _proxy_settings(cfg, args.suite, args.proxy_profile), cache)
         settings = {"physical": cfg.get("metrics", {}).get("physical", {}), "sim": cfg.get("sim", {})}
         result = scene_metrics(scene, ["physical"], MetricInputs(proxies=Path(tmp) / "p.npz", cache_dir=cache),
                                settings)["physical"]
@@ -388,14 +396,20 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--given", help="topology JSON for --topology given (default: ../gt/topology.json)")
     g.add_argument("--camera", help="the photo's camera.json in the scene's frame, for the method's faithful.ray "
                                     "(default: ../reference/camera.json when it exists)")
-    g.add_argument("--suite", help="take the proxy settings of this suite of the config (e.g. real: the lighter "
-                                   "CoACD search for 30k-face reconstructions; default: the global proxies section)")
+    which = g.add_mutually_exclusive_group()
+    which.add_argument("--suite", help="take the proxy settings of this suite of the config (e.g. real: the lighter "
+                                       "CoACD search for 30k-face reconstructions; default: the global proxies "
+                                       "section)")
+    which.add_argument("--proxy-profile", metavar="NAME", help="take this proxy profile of the config over the "
+                                                               "global proxies section (e.g. reconstruction)")
     g.set_defaults(func=cmd_ground)
 
     m = sub.add_parser("metrics", help="physical metrics of one scene")
     m.add_argument("scene", help="scene.json or its folder")
     m.add_argument("--full", action="store_true", help="print per-object values too")
-    m.add_argument("--suite", help="take the proxy settings of this suite of the config (as ground --suite)")
+    which = m.add_mutually_exclusive_group()
+    which.add_argument("--suite", help="take the proxy settings of this suite of the config (as ground --suite)")
+    which.add_argument("--proxy-profile", metavar="NAME", help="take this proxy profile (as ground --proxy-profile)")
     m.set_defaults(func=cmd_metrics)
 
     b = sub.add_parser("bench", help="build one embedded benchmark scene")
