@@ -223,6 +223,19 @@ def test_block_tipping_off_an_edge_without_going_far_is_shifted_back_flat(work, 
     assert t[0] < 0.05 and np.linalg.norm(t[:2] - pose[:2, 3]) <= max_shift + 1e-6
 
 
+def joint_settle_then(assemble, edit):
+    """The real ``_joint_settle``, then ``edit(records)`` on the records it updated (a stand-in for what the release
+    did: an object it knocked over)."""
+    real = assemble._joint_settle
+
+    def released(scene_, proxies, sim, cache_dir, fp, sp, objects_, coms, inputs):
+        poses = real(scene_, proxies, sim, cache_dir, fp, sp, objects_, coms, inputs)
+        edit(objects_)
+        return poses
+
+    return released
+
+
 def toppled_box(work):
     """A box put on the table 2 mm above its top, that releasing the whole scene left on its side on the floor
     beside the table (its record says so): its input pose, the scene, graph, faithful params, the toppled pose and
@@ -314,6 +327,57 @@ def test_regrounding_that_brings_the_scene_down_when_released_together_is_undone
     assert not reground["kept"] and reground["undone"] == ["table"] and reground["remedy"]
     assert objects == before[0] and masses.keys() == before[1].keys() and bases == before[2]
     np.testing.assert_array_equal(masses["table"], before[1]["table"])
+
+
+@pytest.mark.parametrize("first_far", [0.4, 0.0])
+def test_regrounding_kept_when_only_what_fell_before_falls_again_nearer_its_input(work, monkeypatch, first_far):
+    # the toppled box (first fell 0.4 m from its input) is grounded again on the table; the last release is made to
+    # report that the box itself moved again (stood in for: 0.1 m, 50 deg), nothing else. Nothing that had held
+    # broke, and the box lies nearer its input than where it first fell: the regrounded rest is kept. Had it first
+    # fallen nowhere (0 m), the regrounded rest would not be nearer, and it is undone as before
+    from phiscene.assembly import assemble
+
+    pose, scene, g, params, toppled, objects = toppled_box(work)
+    objects["box"]["displacement"] = first_far
+    monkeypatch.setattr(assemble, "_joint_settle",
+                        joint_settle_then(assemble, lambda recs: recs["box"].update(joint_settle=[0.1, 50.0])))
+    poses = assemble._reground_collapsed(scene, g.order, convex_proxies(scene, work["cache"]), params, SIM,
+                                         work["cache"], g, {}, {"table": TABLE, "box": toppled}, objects,
+                                         {"table": np.zeros(3), "box": np.zeros(3)}, {}, {}, None)
+    if first_far == 0.0:
+        assert not objects["box"]["reground"]["kept"] and objects["box"]["reground"]["undone"] == ["box"]
+        np.testing.assert_array_equal(poses["box"], toppled)
+        return
+    assert objects["box"]["reground"]["kept"] and "undone" not in objects["box"]["reground"]
+    assert objects["box"]["displacement"] < first_far
+    assert np.linalg.norm(poses["box"][:3, 3] - pose[:3, 3]) < 0.01  # on the table top where it was put
+
+
+def test_an_object_the_joint_release_pushed_through_the_floor_is_grounded_again(work, monkeypatch):
+    # the first joint release left the box upright beside the table, 3 cm into the floor: it neither toppled nor
+    # moved past reground_move, but its collision shape reaches below the ground deeper than contact_tol (and would
+    # drop every object of the drift test with it). It is grounded again from its input, on the table top. Then the
+    # last release is made to report the table knocked over (stood in for): that would undo the regrounding, but not
+    # back to a rest with the box through the floor; the regrounded rest is kept
+    from phiscene.assembly import assemble
+
+    pose, scene, g, params, _, objects = toppled_box(work)
+    sunk = make_pose(translation=(0.4, -0.05, 0.05 - 0.03))
+    objects["box"]["joint_settle"] = [0.05, 0.0]
+    proxies = convex_proxies(scene, work["cache"])
+    free = ["table", "box"]
+    assert not assemble._collapsed(objects["box"], params.faithful)
+    first = {"table": TABLE, "box": sunk}
+    assert assemble._sunk(scene, first, proxies, {}, free, params.faithful.contact_tol) == {"box"}
+    assert assemble._sunk(scene, first, proxies, {}, free, 0.031) == set()
+    monkeypatch.setattr(assemble, "_joint_settle",
+                        joint_settle_then(assemble, lambda recs: recs["table"].update(joint_settle=[0.3, 90.0])))
+    poses = assemble._reground_collapsed(scene, g.order, proxies, params, SIM, work["cache"], g, {},
+                                         {"table": TABLE, "box": sunk}, objects,
+                                         {"table": np.zeros(3), "box": np.zeros(3)}, {}, {}, None)
+    assert objects["box"]["reground"]["kept"] and "undone" not in objects["box"]["reground"]
+    assert np.linalg.norm(poses["box"][:3, 3] - pose[:3, 3]) < 0.01  # on the table top where it was put
+    assert assemble._sunk(scene, poses, proxies, {}, free, params.faithful.contact_tol) == set()
 
 
 @pytest.mark.parametrize("onto_reach", [0.3, 0.0])

@@ -11,7 +11,7 @@ FRONT3D = 10  # 3D-FRONT rooms (front3d_scene: their SAM 3D initial scenes go th
 # import_sam3d levelled scenes without a given floor (they parted)
 PROXIES = 7
 TOPOLOGY = 14
-GROUND = 35
+GROUND = 36
 METRICS = 8
 TABLES = 7
 REPORT = 1

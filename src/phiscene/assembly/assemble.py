@@ -641,6 +641,22 @@ def _collapsed(rec: dict, fp: FaithfulParams) -> bool:
     return moved is not None and (moved[1] > fp.max_stable_angle or moved[0] > fp.reground_move)
 
 
+def _sunk(scene: Scene, poses: dict[str, np.ndarray], proxies: dict[str, Proxy], bases: dict[str, np.ndarray],
+          ids: list[str], depth: float) -> set[str]:
+    """The objects of ``ids`` whose collision shape (proxies with their completed base, at ``poses``) reaches
+    deeper than ``depth`` (m) below the ground: pushed through the floor by a joint release of objects that
+    overlap (a reconstruction's chairs through its tables), which no later stage undoes and which drops every
+    object of the drift tests with it (their ground is the scene's lowest point, :func:`~phiscene.scene.
+    ground_below`)."""
+    out = set()
+    for oid in ids:
+        hulls = with_base(proxies[oid], bases.get(oid)).hulls
+        lowest = min(float(transform_points(poses[oid], np.asarray(h, dtype=float))[:, 2].min()) for h in hulls)
+        if lowest < scene.ground_height - depth:
+            out.add(oid)
+    return out
+
+
 def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy], params: "AssemblyParams",
                         sim: SimSettings, cache_dir: Path, graph, attached: dict[str, str],
                         poses: dict[str, np.ndarray], objects: dict[str, dict], coms: dict[str, np.ndarray],
@@ -658,11 +674,18 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
     closeness`). The record gets ``reground`` (the new attempt's settling record and whether it was kept) and the
     certificate's remedy a ``+reground``.
 
-    That last joint settling may bring the scene down instead (:func:`_collapsed`: the vase put back on a dish
-    in a Gen3DSR reconstruction, released with it, tips the dish over and what stands on it). Then the regrounded
-    poses are undone: every record and the declared centres of mass and bases are those of the first joint
-    settling's rest again, and each regrounded object's ``reground`` gets ``kept`` false and ``undone`` (the ids
-    that collapsed).
+    An object the first joint settling left through the floor (:func:`_sunk`, deeper than ``contact_tol``) counts as
+    collapsed too.
+
+    That last joint settling may bring the scene down instead (:func:`_collapsed` or through the floor: the vase put
+    back on a dish in a Gen3DSR reconstruction, released with it, tips the dish over and what stands on it). Then
+    the regrounded poses are undone: every record and the declared centres of mass and bases are those of the first
+    joint settling's rest again, and each regrounded object's ``reground`` gets ``kept`` false and ``undone`` (the
+    ids that collapsed). Not when that rest has an object through the floor that the last one has lifted out
+    (Digital Cousins' classroom: a chair pushed 27 cm into the floor dropped every object of the drift test with
+    it), nor when only objects that had collapsed before collapse again and they end nearer their input in all
+    (their summed displacement): the last rest is then the better of two (a SceneGen room whose first release threw
+    two objects 3.5 m).
 
     Returns
     -------
@@ -672,7 +695,9 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
     from phiscene.sim.bullet import BulletWorld
 
     fp, pp = params.faithful, params.penetration_params
-    collapsed = [o for o in order if o not in attached and _collapsed(objects[o], fp)]
+    free = [o for o in order if o not in attached]
+    sunk = _sunk(scene, poses, proxies, bases, free, fp.contact_tol)
+    collapsed = [o for o in free if _collapsed(objects[o], fp) or o in sunk]
     if not collapsed:
         return poses
     kept = []
@@ -716,8 +741,16 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
     settled = _joint_settle(_as_grounded(scene.with_poses(poses), attached, masses, bases), proxies, sim, cache_dir,
                             fp, params.settle_params, objects, coms,
                             {o: np.asarray(scene.get(o).pose, float) for o in order})
-    fallen = [o for o in order if o not in attached and _collapsed(objects[o], fp)]
-    if not fallen:
+    sunk_after = _sunk(scene, settled, proxies, bases, free, fp.contact_tol)
+    fallen = [o for o in free if _collapsed(objects[o], fp) or o in sunk_after]
+    if not fallen or sunk - sunk_after:
+        return settled
+
+    def far(records: dict[str, dict]) -> float:
+        return sum(float(records[o].get("displacement", 0.0)) for o in collapsed)
+
+    if set(fallen) <= set(collapsed) and far(objects) <= far(saved[0]):
+        # nothing broke that had held before, and what fell again lies nearer its input than where it first fell
         return settled
     # released together, the scene with the regrounded objects collapsed (a vase put back on a dish tips the dish
     # over, and what stands on it): the regrounded poses are undone, the first joint settling's rest is kept
