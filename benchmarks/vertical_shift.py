@@ -16,7 +16,6 @@ error against ground truth (the shift that would be right). Nothing is grounded 
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -29,8 +28,7 @@ from phiscene.transforms import make_pose
 def lifted(scene: Scene, ids: list[str], delta: float) -> Scene:
     """``scene`` with the objects ``ids`` moved up by ``delta`` (m)."""
     lift = make_pose(translation=[0.0, 0.0, delta])
-    return replace(scene, objects=[replace(o, pose=lift @ np.asarray(o.pose)) if o.id in ids else o
-                                   for o in scene.objects])
+    return scene.with_poses({i: lift @ np.asarray(scene.get(i).pose) for i in ids})
 
 
 def median_rise(scene: Scene, ref: Scene, ids: list[str]) -> float:

@@ -86,16 +86,13 @@ def _check_bench(cfg: dict, suite: str) -> None:
     """The benchmark settings ``phiscene bench --suite`` builds with: ``benchmark``, then the suite's merged over it
     and completed by its generator's defaults (``ConfigError`` naming the setting; an unknown suite or one that no
     generator builds is left to :func:`cmd_bench`)."""
-    from phiscene.bench.build import TEMPLATES, BenchParams, with_suite_defaults
-    from phiscene.config import bench_settings, check_params
+    from phiscene.bench.build import TEMPLATES, BenchParams
+    from phiscene.config import check_params, check_suite_benchmark
 
     check_params(BenchParams, cfg.get("benchmark"), "benchmark")
     spec = (cfg.get("suites") or {}).get(suite)
-    if not isinstance(spec, dict) or "source" in spec or spec.get("generator", suite) not in TEMPLATES:
-        return
-    check_params(BenchParams, spec.get("benchmark"), f"suites.{suite}.benchmark")
-    check_params(BenchParams, with_suite_defaults(spec.get("generator", suite), bench_settings(cfg, suite)),
-                 f"suites.{suite}.benchmark")
+    if isinstance(spec, dict) and "source" not in spec and spec.get("generator", suite) in TEMPLATES:
+        check_suite_benchmark(cfg, suite)
 
 
 def _known_suite(cfg: dict, suite: str) -> None:
@@ -116,11 +113,11 @@ def _bench_settings(cfg: dict, suite: str) -> dict:
 def _proxy_settings(cfg: dict, suite: str | None, profile: str | None = None) -> dict:
     """The config's proxy settings: with ``suite``, that suite's (its profile and override, as the workflow uses
     them); with ``profile``, the named ``proxy_profiles`` entry over the global section."""
-    from phiscene.config import ConfigError, deep_merge, proxy_profile, suite_proxies
+    from phiscene.config import ConfigError, proxy_profile, suite_proxies
 
     if profile is not None:
         try:
-            return deep_merge(cfg.get("proxies"), proxy_profile(cfg, profile, "--proxy-profile"))
+            return proxy_profile(cfg, profile, "--proxy-profile")
         except ConfigError as exc:
             raise PhisceneError(str(exc).removeprefix("config: ")) from None
     if suite is not None:

@@ -43,9 +43,9 @@ from typing import Any
 from phiscene.params import nested_params
 
 __all__ = ["METHOD_PARAMS", "SECTIONS", "SOURCE_PARAMS", "STAGE_SECTIONS", "ConfigError", "bench_settings",
-           "check_config", "check_params", "check_stage_config", "deep_merge", "job_assembly", "load_class",
-           "method_assembly", "method_params", "packaged_config_path", "proxy_profile", "schema_sections",
-           "suite_generator", "suite_proxies"]
+           "check_config", "check_params", "check_stage_config", "check_suite_benchmark", "deep_merge",
+           "job_assembly", "load_class", "method_assembly", "method_params", "packaged_config_path", "proxy_profile",
+           "schema_sections", "suite_generator", "suite_proxies"]
 
 def packaged_config_path() -> Path:
     """The workflow's ``config/config.yaml`` as shipped with the package (``phiscene/defaults/config.yaml``, a link
@@ -153,8 +153,9 @@ def job_assembly(config: Mapping[str, Any], method: str) -> dict:
     return merged
 
 
-def proxy_profile(config: Mapping[str, Any], name: str, where: str) -> Mapping[str, Any]:
-    """The named proxy settings ``proxy_profiles.<name>`` (a partial ``proxies`` section).
+def proxy_profile(config: Mapping[str, Any], name: str, where: str) -> dict:
+    """The proxy settings of the named profile: ``proxy_profiles.<name>`` (a partial ``proxies`` section)
+    deep-merged over ``proxies``.
 
     Raises
     ------
@@ -165,7 +166,7 @@ def proxy_profile(config: Mapping[str, Any], name: str, where: str) -> Mapping[s
     if name not in profiles:
         raise ConfigError(f"config: {where}: no proxy profile {name!r} (known: "
                           f"{', '.join(sorted(profiles)) or 'none; define it under proxy_profiles'})")
-    return _mapping(profiles[name], f"proxy_profiles.{name}")
+    return deep_merge(config.get("proxies"), _mapping(profiles[name], f"proxy_profiles.{name}"))
 
 
 def suite_proxies(config: Mapping[str, Any], suite: str | None = None) -> dict:
@@ -180,13 +181,13 @@ def suite_proxies(config: Mapping[str, Any], suite: str | None = None) -> dict:
     ConfigError
         The suite names a profile that ``proxy_profiles`` does not define.
     """
-    merged = deep_merge(config.get("proxies"), None)
     if suite is None:
-        return merged
+        return deep_merge(config.get("proxies"), None)
     spec = config["suites"][suite]
-    if spec.get("proxy_profile") is not None:
-        merged = deep_merge(merged, proxy_profile(config, str(spec["proxy_profile"]), f"suites.{suite}.proxy_profile"))
-    return deep_merge(merged, spec.get("proxies"))
+    profile = spec.get("proxy_profile")
+    base = config.get("proxies") if profile is None else proxy_profile(config, str(profile),
+                                                                       f"suites.{suite}.proxy_profile")
+    return deep_merge(base, spec.get("proxies"))
 
 
 def suite_generator(config: Mapping[str, Any], suite: str) -> str:
@@ -325,9 +326,9 @@ def check_stage_config(config: Mapping[str, Any]) -> None:
         present, value = _section(config, path)
         if present:
             check_params(load_class(SECTIONS[path]), value, path)
-    for name, profile in _mapping(config.get("proxy_profiles"), "proxy_profiles").items():
-        check_params(load_class(SECTIONS["proxies"]), deep_merge(config.get("proxies"), _mapping(
-            profile, f"proxy_profiles.{name}")), f"proxy_profiles.{name}")
+    for name in _mapping(config.get("proxy_profiles"), "proxy_profiles"):
+        where = f"proxy_profiles.{name}"
+        check_params(load_class(SECTIONS["proxies"]), proxy_profile(config, name, where), where)
     for suite, spec in _mapping(config.get("suites"), "suites").items():
         spec = _mapping(spec, f"suites.{suite}")
         if "proxies" in spec or "proxy_profile" in spec:
@@ -347,6 +348,24 @@ def check_stage_config(config: Mapping[str, Any]) -> None:
         if spec.get("kind") == "phi_scene":
             _mapping(spec.get("assembly"), f"methods.{name}.assembly")  # a non-mapping override: one line too
             check_params(load_class(SECTIONS["assembly"]), method_assembly(config, name), f"methods.{name}.assembly")
+
+
+def check_suite_benchmark(config: Mapping[str, Any], suite: str) -> None:
+    """A generated suite's benchmark settings: its own ``benchmark`` override, then :func:`bench_settings` completed
+    by its generator's defaults (what the benchmark rule and ``phiscene bench`` build with).
+
+    Raises
+    ------
+    ConfigError
+        A bad key or value (``config: suites.<suite>.benchmark...``), or no generator builds the suite
+        (:func:`suite_generator`).
+    """
+    from phiscene.bench.build import BenchParams, with_suite_defaults
+
+    generator = suite_generator(config, suite)
+    check_params(BenchParams, config["suites"][suite].get("benchmark"), f"suites.{suite}.benchmark")
+    check_params(BenchParams, with_suite_defaults(generator, bench_settings(config, suite)),
+                 f"suites.{suite}.benchmark")
 
 
 def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -> None:
@@ -381,8 +400,6 @@ def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -
             check_params(load_class(spec), value, path)
     check_stage_config(config)
 
-    from phiscene.bench.build import BenchParams, with_suite_defaults
-
     for suite, spec in _mapping(config.get("suites"), "suites").items():
         spec = _mapping(spec, f"suites.{suite}")
         if "source" in spec:
@@ -396,10 +413,7 @@ def check_config(config: Mapping[str, Any], sections: list[str] | None = None) -
                                   f"(known: {', '.join(sorted(SOURCE_PARAMS))})")
             check_params(load_class(SOURCE_PARAMS[kind]), source, f"suites.{suite}.source")
         else:
-            generator = suite_generator(config, suite)
-            check_params(BenchParams, spec.get("benchmark"), f"suites.{suite}.benchmark")
-            merged = with_suite_defaults(generator, bench_settings(config, suite))
-            check_params(BenchParams, merged, f"suites.{suite}.benchmark")
+            check_suite_benchmark(config, suite)
 
     for name, spec in _mapping(config.get("methods"), "methods").items():
         spec = _mapping(spec, f"methods.{name}")
