@@ -15,7 +15,7 @@ from scenes import box_meshes, convex_proxies
 
 from phiscene.assembly import AssemblyParams, ground_scene
 from phiscene.assembly.faithful import FaithfulParams
-from phiscene.render import look_at_camera, visible_shares
+from phiscene.render import look_at_camera, pixel_rays, pixel_window, visible_shares
 from phiscene.scene import Scene, SceneObject
 from phiscene.sim.settings import SimSettings
 from phiscene.topology.graph import SupportEdge, SupportGraph
@@ -50,6 +50,33 @@ def test_outside_the_image_the_share_is_undefined(tmp_path):
     meshes = box_meshes(tmp_path, {"cube": (CUBE, CUBE, CUBE)})
     scene = Scene([SceneObject("away", meshes["cube"], make_pose(translation=(0.0, -5.0, HEIGHT)))])  # behind
     assert np.isnan(visible_shares(scene, CAMERA)["away"])
+
+
+def test_pixel_window_holds_every_pixel_whose_ray_meets_the_mesh():
+    from phiscene.o3d import open3d
+
+    o3d = open3d()
+    W, H = int(CAMERA["width"]), int(CAMERA["height"])
+    rays = o3d.core.Tensor(pixel_rays(CAMERA))
+    rng = np.random.default_rng(0)
+    for _ in range(5):  # boxes turned and moved about the optical axis, some reaching past the image's edge
+        box = trimesh.creation.box((0.5, 0.3, 0.2), transform=make_pose(
+            rotation=trimesh.transformations.random_rotation_matrix(rng.random(3))[:3, :3],
+            translation=(rng.uniform(-1.2, 1.2), rng.uniform(-1.0, 1.0), HEIGHT + rng.uniform(-0.8, 0.8))))
+        cast = o3d.t.geometry.RaycastingScene()
+        cast.add_triangles(o3d.core.Tensor(np.asarray(box.vertices, dtype=np.float32)),
+                           o3d.core.Tensor(np.asarray(box.faces, dtype=np.uint32)))
+        hit = np.isfinite(cast.cast_rays(rays)["t_hit"].numpy()).reshape(H, W)
+        rows, cols = pixel_window(CAMERA, box.vertices)
+        inside = np.zeros((H, W), bool)
+        inside[rows, cols] = True
+        assert hit.any() and not (hit & ~inside).any()
+        assert inside.sum() < 0.5 * H * W  # a window, not the image
+    behind = trimesh.creation.box((0.5, 0.5, 0.5), transform=make_pose(translation=(0.0, -3.0, HEIGHT)))  # about the eye
+    assert pixel_window(CAMERA, behind.vertices) == (slice(0, H), slice(0, W))
+    aside = trimesh.creation.box((0.1, 0.1, 0.1), transform=make_pose(translation=(5.0, 0.0, HEIGHT)))  # off the image
+    rows, cols = pixel_window(CAMERA, aside.vertices)
+    assert rows.stop - rows.start <= 0 or cols.stop - cols.start <= 0
 
 
 PLANK = (0.01, 0.3, 1.0)  # m: on its 1 x 30 cm edge a 4-degree tilt topples it, even with its mass low (ballast)

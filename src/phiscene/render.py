@@ -373,7 +373,8 @@ def visible_shares(scene: Scene, camera: dict) -> dict[str, float]:
 
     An object's pixels alone are those whose ray meets its world-frame mesh, whatever lies in front; the share
     is 1 for an object nothing hides, 0 for one entirely hidden behind others (or the ground), and ``nan`` for
-    one outside the image.
+    one outside the image. Its rays are cast only within :func:`pixel_window` (a ray outside it cannot meet the
+    mesh), so a small object costs a few rays, not the whole image's.
 
     Returns
     -------
@@ -384,16 +385,51 @@ def visible_shares(scene: Scene, camera: dict) -> dict[str, float]:
 
     o3d = open3d()
     labels = instance_labels(scene, camera).ravel()
-    rays = o3d.core.Tensor(pixel_rays(camera))
+    W, H = int(camera["width"]), int(camera["height"])
+    rays = pixel_rays(camera).reshape(H, W, 6)
     shares = {}
     for index, o in enumerate(scene.objects):
         m = o.world_mesh()
-        alone = o3d.t.geometry.RaycastingScene()
-        alone.add_triangles(o3d.core.Tensor(np.asarray(m.vertices, dtype=np.float32)),
-                            o3d.core.Tensor(np.asarray(m.faces, dtype=np.uint32)))
-        total = int(np.isfinite(alone.cast_rays(rays)["t_hit"].numpy()).sum())
+        rows, cols = pixel_window(camera, np.asarray(m.vertices, dtype=float))
+        window = np.ascontiguousarray(rays[rows, cols].reshape(-1, 6))
+        total = 0
+        if len(window):
+            alone = o3d.t.geometry.RaycastingScene()
+            alone.add_triangles(o3d.core.Tensor(np.asarray(m.vertices, dtype=np.float32)),
+                                o3d.core.Tensor(np.asarray(m.faces, dtype=np.uint32)))
+            total = int(np.isfinite(alone.cast_rays(o3d.core.Tensor(window))["t_hit"].numpy()).sum())
         shares[o.id] = float(np.count_nonzero(labels == index) / total) if total else float("nan")
     return shares
+
+
+def pixel_window(camera: dict, points: np.ndarray) -> tuple[slice, slice]:
+    """Rows and columns of ``camera``'s image holding every pixel whose ray can meet a mesh with these vertices.
+
+    A point a ray meets lies on a triangle of the mesh; when every vertex is in front of the camera, the
+    triangle projects into the image plane as a triangle inside the box of the vertices' projections, so the
+    pixel lies in that box (widened here by one pixel against rounding, and clipped to the image). A mesh
+    reaching behind the camera has no bounded projection: the whole image.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+        The mesh's vertices, world frame.
+
+    Returns
+    -------
+    rows, cols : slice
+        Possibly empty (a mesh wholly outside the image).
+    """
+    W, H = int(camera["width"]), int(camera["height"])
+    T = np.asarray(camera["world_to_camera"], dtype=float)
+    depth = np.asarray(points, dtype=float) @ T[2, :3] + T[2, 3]
+    if len(depth) == 0 or not depth.min() > 0.0:
+        return slice(0, H), slice(0, W)
+    uv = project(camera, points)
+    lo, hi = np.floor(uv.min(axis=0)) - 1, np.ceil(uv.max(axis=0)) + 1
+    cols = slice(int(np.clip(lo[0], 0, W)), int(np.clip(hi[0] + 1, 0, W)))
+    rows = slice(int(np.clip(lo[1], 0, H)), int(np.clip(hi[1] + 1, 0, H)))
+    return rows, cols
 
 
 def render_instance_mask(scene: Scene, camera: dict | str | Path) -> np.ndarray:
