@@ -72,7 +72,8 @@ def test_pixel_window_holds_every_pixel_whose_ray_meets_the_mesh():
         inside[rows, cols] = True
         assert hit.any() and not (hit & ~inside).any()
         assert inside.sum() < 0.5 * H * W  # a window, not the image
-    behind = trimesh.creation.box((0.5, 0.5, 0.5), transform=make_pose(translation=(0.0, -3.0, HEIGHT)))  # about the eye
+    # around the eye: a vertex behind the camera
+    behind = trimesh.creation.box((0.5, 0.5, 0.5), transform=make_pose(translation=(0.0, -3.0, HEIGHT)))
     assert pixel_window(CAMERA, behind.vertices) == (slice(0, H), slice(0, W))
     aside = trimesh.creation.box((0.1, 0.1, 0.1), transform=make_pose(translation=(5.0, 0.0, HEIGHT)))  # off the image
     rows, cols = pixel_window(CAMERA, aside.vertices)
