@@ -23,6 +23,13 @@ agree with each other. Its spread (weighted RMS angle of the inliers) is reporte
 A camera looking steeply down (more than about 40 degrees) puts the scene's up outside the prior's cone; when fewer
 than :data:`MIN_AGREEMENT` votes agree, the estimate is made again from priors :data:`STEEP_PRIOR_DEG` steeper.
 
+Objects with no flat face and no upright frame (toys, fruit, plants, bags on a floor) cast box votes whose axes
+are arbitrary, and no two of them may agree. What such a scene still shows is its floor: the objects standing on
+it touch it at their lowest points, which lie on one plane normal to up. When the votes stay that weak,
+:func:`floor_up` fits that plane (the objects with nothing beneath them whose bottoms lie within ``floor_band`` of
+the lowest, each one witness; at least :data:`FLOOR_MIN_OBJECTS` of them, spread over the floor, and more than the
+votes that agree) and its normal is the estimate (:attr:`UpEstimate.floor` records it).
+
 :func:`levelling_transform` turns the estimate into a rigid transform: the minimal rotation taking up to +z,
 preceded by the up-axis convention of the source (y-up files become z-up), a rotation about z that makes the
 camera's viewing direction +y (x is the camera's right), and a translation that puts the ground plane at
@@ -56,6 +63,11 @@ MIN_AGREEMENT = 3
 #: scenes tilted up to about 70 degrees are in reach, while a wall's normal, 90 degrees from up, stays 20 degrees
 #: outside the cone of a prior turned towards it from a level camera.
 STEEP_PRIOR_DEG = 30.0
+
+#: Objects standing on the floor that :func:`estimate_up` needs to take its plane (:func:`floor_up`): three points
+#: always lie on a plane, a fourth tests it (a Gen3DSR room's desk and two chairs, placed decimetres off, gave a
+#: plane 35 degrees from its votes with no residual at all).
+FLOOR_MIN_OBJECTS = 4
 
 #: Up axis conventions of source files -> the rotation that makes them z-up.
 UP_AXES = ("y", "z")
@@ -94,6 +106,9 @@ class LevelParams(Params):
     floor_band
         Ground height (:func:`floor_height`): objects with nothing beneath them whose bottoms lie within this
         height (m) of the lowest one stand on the ground; 0 = the lowest point of the scene.
+    floor_plane_rms
+        :func:`floor_up`'s plane is taken only when the objects' lowest points lie within this RMS distance (m) of
+        it (depth errors of real reconstructions put them 1-3 cm off; more is not one floor).
     floor_rest_deg
         Each standing object's bottom is taken where it would rest (:func:`resting_bottom`): turned, about its
         centre of mass, onto the resting facet of its convex hull nearest to facing down, when that facet is
@@ -116,6 +131,7 @@ class LevelParams(Params):
     seed: int = 0
     floor_band: float = 0.25
     floor_rest_deg: float = 20.0
+    floor_plane_rms: float = 0.03
 
     def check(self) -> None:
         """Angles in (0, 90) degrees, shares in (0, 1], positive counts (``ValueError``)."""
@@ -127,6 +143,8 @@ class LevelParams(Params):
         if not 0.0 <= self.floor_rest_deg < 90.0:
             raise ValueError(f"levelling parameter 'floor_rest_deg' must be in [0, 90) degrees, got "
                              f"{self.floor_rest_deg}")
+        if self.floor_plane_rms < 0:
+            raise ValueError(f"levelling parameter 'floor_plane_rms' must be >= 0, got {self.floor_plane_rms}")
         if self.box_weight < 0 or self.candidates < 1 or self.floor_band < 0 or self.weight_power < 0:
             raise ValueError("levelling parameters 'box_weight', 'weight_power' and 'floor_band' must be >= 0 and "
                              "'candidates' >= 1")
@@ -150,6 +168,9 @@ class UpEstimate:
     steep_prior : (3,) float or None
         The steeper prior the votes were cast in, when the camera's up gave too few agreeing votes
         (:func:`estimate_up`); ``None``: the camera's up.
+    floor : FloorPlane or None
+        The floor plane the estimate was taken from, when the votes were too weak (:func:`estimate_up`); ``None``:
+        the votes.
     """
 
     up: np.ndarray
@@ -157,6 +178,7 @@ class UpEstimate:
     spread_deg: float
     votes: dict
     steep_prior: np.ndarray | None = None
+    floor: "FloorPlane | None" = None
 
     def to_dict(self) -> dict:
         """JSON form (``import.json``)."""
@@ -164,7 +186,33 @@ class UpEstimate:
                "spread_deg": float(self.spread_deg), "votes": self.votes}
         if self.steep_prior is not None:
             out["steep_prior"] = [float(v) for v in self.steep_prior]
+        if self.floor is not None:
+            out["floor"] = self.floor.to_dict()
         return out
+
+
+@dataclass(frozen=True)
+class FloorPlane:
+    """The floor through the lowest points of the objects standing on it (:func:`floor_up`).
+
+    Attributes
+    ----------
+    up : (3,) float
+        Unit normal of the plane (pointing along the start direction), source frame.
+    objects
+        Ids of the objects standing on it, one witness each.
+    rms
+        RMS distance (m) of their lowest points from the plane.
+    """
+
+    up: np.ndarray
+    objects: tuple[str, ...]
+    rms: float
+
+    def to_dict(self) -> dict:
+        """JSON form."""
+        return {"up": [round(float(v), 6) for v in self.up], "objects": list(self.objects),
+                "rms": round(float(self.rms), 6)}
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -250,6 +298,12 @@ def estimate_up(meshes: dict[str, trimesh.Trimesh], prior, params: LevelParams =
     agree (then the most weight), at least :data:`MIN_AGREEMENT` and more than the first, is taken
     (:attr:`UpEstimate.steep_prior` records its prior).
 
+    When still fewer than :data:`MIN_AGREEMENT` votes agree, the floor is fitted (:func:`floor_up`, started from
+    that estimate, the camera's up and the steeper priors): a plane within ``floor_plane_rms`` of the lowest points
+    of at least :data:`FLOOR_MIN_OBJECTS` standing objects, more than the votes that agree, within ``max_tilt_deg`` of
+    the camera's up, is the estimate (the one with the most objects, then the least RMS;
+    :attr:`UpEstimate.floor`).
+
     Parameters
     ----------
     meshes
@@ -270,8 +324,8 @@ def estimate_up(meshes: dict[str, trimesh.Trimesh], prior, params: LevelParams =
     a = _unit(np.cross(prior, [1.0, 0.0, 0.0] if abs(prior[0]) < 0.9 else [0.0, 1.0, 0.0]))
     b = np.cross(prior, a)
     c, s = np.cos(np.radians(STEEP_PRIOR_DEG)), np.sin(np.radians(STEEP_PRIOR_DEG))
-    for side in (a, -a, b, -b):
-        steep = _unit(c * prior + s * side)
+    steeper = [_unit(c * prior + s * side) for side in (a, -a, b, -b)]
+    for steep in steeper:
         estimate = _estimate(meshes, steep, params)
         agree = _agreement(estimate)
         if agree[0] >= MIN_AGREEMENT and agree > score:
@@ -280,7 +334,35 @@ def estimate_up(meshes: dict[str, trimesh.Trimesh], prior, params: LevelParams =
     if best.steep_prior is not None:
         log.info("up: %d votes agree within %g deg of the camera's up, %d of a prior %g deg steeper: levelled by "
                  "%.1f deg", first, params.max_tilt_deg, score[0], STEEP_PRIOR_DEG, best.tilt_deg)
+    if score[0] < MIN_AGREEMENT:
+        parts = {i: np.asarray(m.vertices, dtype=float) for i, m in meshes.items()}
+        # from the estimate, the camera's up and the steeper priors: a start far off the floor's normal sees its
+        # far side higher than the band, and too few objects on it
+        planes = [f for f in (floor_up(parts, start, params.floor_band) for start in [best.up, prior, *steeper])
+                  if f is not None and f.rms <= params.floor_plane_rms
+                  and angle_deg(f.up, prior) <= params.max_tilt_deg]
+        floor = min(planes, key=lambda f: (-len(f.objects), f.rms), default=None)
+        if floor is not None and len(floor.objects) >= FLOOR_MIN_OBJECTS and len(floor.objects) > score[0]:
+            log.info("up: %d votes agree; the floor under %d standing objects (RMS %.3f m) levels by %.1f deg",
+                     score[0], len(floor.objects), floor.rms, angle_deg(floor.up, prior))
+            return _recount(best.votes, floor.up, prior, params, floor)
     return best
+
+
+def _recount(votes: dict, up: np.ndarray, prior: np.ndarray, params: LevelParams,
+             floor: "FloorPlane") -> UpEstimate:
+    """The estimate ``up`` (taken from ``floor``), with each vote's ``inlier`` flag and the spread recounted
+    about it."""
+    cos_in = np.cos(np.radians(params.inlier_deg))
+    record, ang, weight = {}, [], []
+    for i, v in votes.items():
+        inlier = bool(np.asarray(v["up"], dtype=float) @ up >= cos_in * np.linalg.norm(v["up"]))
+        record[i] = {**v, "inlier": inlier}
+        if inlier:
+            ang.append(np.radians(angle_deg(v["up"], up)))
+            weight.append(v["weight"])
+    spread = float(np.degrees(np.sqrt(np.average(np.square(ang), weights=weight)))) if ang else 0.0
+    return UpEstimate(up, angle_deg(up, prior), spread, record, None, floor)
 
 
 def _agreement(estimate: UpEstimate) -> tuple[int, float]:
@@ -448,22 +530,100 @@ def floor_height(parts: list[np.ndarray], band: float, rest_deg: float = 0.0) ->
     The ground height (m).
     """
     lo = np.array([p.min(axis=0) for p in parts])
-    hi = np.array([p.max(axis=0) for p in parts])
     if band <= 0:
         return float(lo[:, 2].min())
     if len(parts) < 2:
         return resting_bottom(parts[0], rest_deg)
+    standing = standing_objects(parts)
+    bottoms = np.array([resting_bottom(parts[i], rest_deg) for i in range(len(parts)) if standing[i]])
+    return float(np.median(bottoms[bottoms <= bottoms.min() + band]))
+
+
+def standing_objects(parts: list[np.ndarray]) -> np.ndarray:
+    """Which objects of a levelled scene (z up) have nothing beneath them: no other object covers at least
+    :data:`BENEATH_SHARE` of their bounding-box footprint with a top below their mid-height.
+
+    Parameters
+    ----------
+    parts : list of (n_i, 3) float
+        Each object's vertices.
+
+    Returns
+    -------
+    (len(parts),) bool
+    """
+    lo = np.array([p.min(axis=0) for p in parts])
+    hi = np.array([p.max(axis=0) for p in parts])
     mid = 0.5 * (lo[:, 2] + hi[:, 2])
     area = np.maximum(np.prod(hi[:, :2] - lo[:, :2], axis=1), 1e-12)
-    standing = []
+    standing = np.ones(len(parts), dtype=bool)
     for i in range(len(parts)):
         overlap = np.prod(np.clip(np.minimum(hi[:, :2], hi[i, :2]) - np.maximum(lo[:, :2], lo[i, :2]), 0, None),
                           axis=1)
         beneath = (overlap >= BENEATH_SHARE * area[i]) & (hi[:, 2] < mid[i])
         beneath[i] = False
-        standing.append(not beneath.any())
-    bottoms = np.array([resting_bottom(parts[i], rest_deg) for i in range(len(parts)) if standing[i]])
-    return float(np.median(bottoms[bottoms <= bottoms.min() + band]))
+        standing[i] = not beneath.any()
+    return standing
+
+
+#: The lowest points :func:`floor_up` fits must spread at least this far (m, RMS about their centre) across the
+#: floor in its narrowest direction: a row of objects along one line leaves the plane free to turn about it.
+FLOOR_MIN_SPREAD = 0.1
+#: Refits of :func:`floor_up` at most (each with the objects' lowest points along the last normal).
+FLOOR_ITERATIONS = 8
+
+
+def floor_up(parts: dict[str, np.ndarray], start, band: float) -> FloorPlane | None:
+    """The plane through the lowest points of the objects standing on the floor, and its normal.
+
+    Levelled along the current up direction (``start`` first), the objects with nothing beneath them
+    (:func:`standing_objects`) whose lowest points lie within ``band`` of the lowest such point stand on the floor;
+    a least-squares plane through those points gives the next up direction, and the objects' lowest points are
+    taken again along it, until it stops turning (at most :data:`FLOOR_ITERATIONS` fits). On a level floor every
+    object touches it at its lowest point whatever its shape or turn (a ball's lowest point lies under its centre),
+    so with no error the plane is the floor exactly.
+
+    Parameters
+    ----------
+    parts
+        Object id -> its vertices (n_i, 3), source frame.
+    start : (3,) float
+        Up direction to start from (source frame).
+    band
+        Height (m) above the lowest standing object within which an object stands on the floor
+        (:attr:`LevelParams.floor_band`).
+
+    Returns
+    -------
+    The plane; ``None`` when fewer than 3 objects stand on it or their lowest points do not spread over it
+    (:data:`FLOOR_MIN_SPREAD`).
+    """
+    ids = list(parts)
+    if len(ids) < 3:
+        return None
+    up = _unit(start)
+    z = np.array([0.0, 0.0, 1.0])
+    for _ in range(FLOOR_ITERATIONS):
+        R = rotation_between(up, z)
+        turned = [np.asarray(parts[i], dtype=float) @ R.T for i in ids]
+        bottoms = np.array([t[:, 2].min() for t in turned])
+        standing = standing_objects(turned)
+        on_floor = standing & (bottoms <= bottoms[standing].min() + band)
+        if on_floor.sum() < 3:
+            return None
+        points = np.array([turned[k][np.argmin(turned[k][:, 2])] for k in np.flatnonzero(on_floor)])
+        centred = points - points.mean(axis=0)
+        if np.linalg.svd(centred[:, :2], compute_uv=False)[1] / np.sqrt(len(points)) < FLOOR_MIN_SPREAD:
+            return None
+        design = np.c_[centred[:, :2], np.ones(len(points))]
+        slope, *_ = np.linalg.lstsq(design, centred[:, 2], rcond=None)
+        normal = R.T @ _unit(np.array([-slope[0], -slope[1], 1.0]))
+        turn = angle_deg(normal, up)
+        up = normal
+        if turn < 1e-4:
+            break
+    rms = float(np.sqrt(np.mean((centred[:, 2] - design @ slope) ** 2)))
+    return FloorPlane(up, tuple(ids[k] for k in np.flatnonzero(on_floor)), rms)
 
 
 def levelling_transform(parts: list[np.ndarray], up, forward=None, floor_band: float = 0.0,
