@@ -429,6 +429,30 @@ def free_xy(rng: np.random.Generator, placed: list[tuple[np.ndarray, float]], r:
     return None
 
 
+def drop_free(rng: np.random.Generator, sim: Sim, a: Asset, placed: list[tuple[np.ndarray, float]], r: float,
+              lo: list[float], hi: list[float], seconds: float, min_gap: float = 0.01,
+              turn: np.ndarray | None = None) -> bool:
+    """Drop ``a`` at a spot of the box [lo, hi] (each (2,)) where its disc of radius ``r`` clears ``placed``
+    (:func:`free_xy`), recorded in ``placed``, and let the scene run ``seconds``.
+
+    Parameters
+    ----------
+    turn : (2, 2) float, optional
+        Maps the spot (the box's frame) to world xy (a table's or tray's yaw); None: the box is in world xy.
+
+    Returns
+    -------
+    False, with nothing dropped, when no spot is free.
+    """
+    xy = free_xy(rng, placed, r, lo, hi, min_gap)
+    if xy is None:
+        return False
+    placed.append((xy, r))
+    sim.add(a, xy if turn is None else turn @ xy)
+    sim.step(seconds)
+    return True
+
+
 def radius(a: Asset) -> float:
     """Horizontal radius (m) of ``a`` in its drop orientation, about its centroid."""
     V = a.mesh.vertices @ a.orient.T
@@ -467,13 +491,9 @@ def scene_table_clutter(rng: np.random.Generator, sim: Sim, cache: Path, n_extra
     n = int(rng.integers(3, 6)) if n_extra is None else n_extra
     for i in range(n):
         o = random_object(rng, f"object_{books + 2 + i}")
-        xy = free_xy(rng, placed, radius(o), [-hx + 0.08, -hy + 0.08], [hx - 0.08, hy - 0.08])
-        if xy is None:
-            continue
-        placed.append((xy, radius(o)))
-        sim.add(o, R[:2, :2] @ xy)
-        sim.step(0.6)
-        expect[o.name] = tz
+        if drop_free(rng, sim, o, placed, radius(o), [-hx + 0.08, -hy + 0.08], [hx - 0.08, hy - 0.08], 0.6,
+                     turn=R[:2, :2]):
+            expect[o.name] = tz
     return expect
 
 
@@ -496,13 +516,8 @@ def scene_tray(rng: np.random.Generator, sim: Sim, cache: Path) -> dict[str, flo
         o = (named_asset(rng, f"duck_{i + 1}", "duck", cache) if k == "duck"
              else random_object(rng, f"object_{i + 1}"))
         r = radius(o)
-        xy = free_xy(rng, placed, r, [-hx + r, -hy + r], [hx - r, hy - r], min_gap=0.0)
-        if xy is None:
-            continue
-        placed.append((xy, r))
-        sim.add(o, R[:2, :2] @ xy)
-        sim.step(0.6)
-        expect[o.name] = 0.004
+        if drop_free(rng, sim, o, placed, r, [-hx + r, -hy + r], [hx - r, hy - r], 0.6, min_gap=0.0, turn=R[:2, :2]):
+            expect[o.name] = 0.004
     o = random_object(rng, f"object_{len(kinds) + 1}")
     ang = rng.uniform(0, 2 * np.pi)
     sim.add(o, (0.45 * np.cos(ang), 0.45 * np.sin(ang)))
@@ -532,12 +547,7 @@ def scene_jenga(rng: np.random.Generator, sim: Sim, cache: Path) -> dict[str, fl
     loose = [named_asset(rng, f"soccerball_{n}", "soccerball", cache)]
     loose += [random_object(rng, f"object_{n + 1 + i}") for i in range(int(rng.integers(2, 4)))]
     for o in loose:
-        xy = free_xy(rng, placed, radius(o), [-0.45, -0.45], [0.45, 0.45], min_gap=0.03)
-        if xy is None:
-            continue
-        placed.append((xy, radius(o)))
-        sim.add(o, xy)
-        sim.step(0.8)
+        drop_free(rng, sim, o, placed, radius(o), [-0.45, -0.45], [0.45, 0.45], 0.8, min_gap=0.03)
     return expect
 
 
@@ -554,12 +564,7 @@ def scene_floor_toys(rng: np.random.Generator, sim: Sim, cache: Path) -> dict[st
     objs += [random_object(rng, f"object_{len(objs) + i}") for i in range(int(rng.integers(1, 3)))]
     placed: list[tuple[np.ndarray, float]] = []
     for o in objs:
-        xy = free_xy(rng, placed, radius(o), [-0.35, -0.35], [0.35, 0.35], min_gap=0.015)
-        if xy is None:
-            continue
-        placed.append((xy, radius(o)))
-        sim.add(o, xy)
-        sim.step(0.8)
+        drop_free(rng, sim, o, placed, radius(o), [-0.35, -0.35], [0.35, 0.35], 0.8, min_gap=0.015)
     return {}
 
 
@@ -611,13 +616,8 @@ def scene_bridge(rng: np.random.Generator, sim: Sim, cache: Path) -> dict[str, f
     for i in range(int(rng.integers(2, 4))):
         o = random_object(rng, f"object_{3 + i}")
         r = min(radius(o), 0.06)
-        xy = free_xy(rng, placed, r, [-lx + r, -0.02], [lx - r, 0.02], min_gap=0.0)
-        if xy is None:
-            continue
-        placed.append((xy, r))
-        sim.add(o, base[:2, :2] @ xy)
-        sim.step(0.6)
-        expect[o.name] = h
+        if drop_free(rng, sim, o, placed, r, [-lx + r, -0.02], [lx - r, 0.02], 0.6, min_gap=0.0, turn=base[:2, :2]):
+            expect[o.name] = h
     o = named_asset(rng, f"ball_{len(sim.assets)}", "ball", cache)
     sim.add(o, base[:2, :2] @ np.array([0.0, rng.choice([-1, 1]) * 0.3]))
     sim.step(0.8)
