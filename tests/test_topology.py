@@ -679,3 +679,20 @@ def test_floor_prior_leaves_furniture_that_is_high_up(tmp_path):
     graph = infer(scene, GeometricParams())
     assert {e.source for e in graph.edges if e.target == "stool"} == {"table"}
     assert graph.meta["floor_standing"] == []
+
+
+def test_geometric_fallback_passes_over_what_the_object_carries(tmp_path):
+    # a board across two boxes, its bottom 10 cm above their tops (beyond contact), a plate sunk 1 cm into it from
+    # above: the plate's top is the first upward surface straight below the board's lowest point + tolerance, but
+    # the board carries it. Taken, that edge closes a cycle, and breaking it leaves the board on nothing but the
+    # ground; passed over, the next surface below is a box's top
+    bb = 0.25  # the board's bottom
+    scene = make_scene(tmp_path, [
+        ("box_a", box([0.2, 0.2, 0.15]), make_pose(translation=[-0.3, 0.0, 0.075])),
+        ("box_b", box([0.2, 0.2, 0.15]), make_pose(translation=[0.3, 0.0, 0.075])),
+        ("board", box([0.9, 0.25, 0.03]), make_pose(translation=[0.0, 0.0, bb + 0.015])),
+        ("plate", box([0.15, 0.15, 0.02]), make_pose(translation=[0.0, 0.0, bb + 0.03]))])
+    g = topology.infer(scene, "geometric")
+    assert g.parents("board") == ["box_a"]  # the two tops are level: the first by name
+    assert g.parents("plate") == ["board"] and g.dropped_edges == []
+    assert g.meta["objects"]["board"]["passed_over"] == ["plate"]

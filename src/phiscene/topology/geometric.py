@@ -111,7 +111,7 @@ from phiscene.topology.contacts import (
 from phiscene.topology.floor import floor_standing
 from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph
 from phiscene.topology.leaning import floating_tipping, leaned_on, tipping, tipping_partner
-from phiscene.topology.order import finalize
+from phiscene.topology.order import break_cycles, finalize
 from phiscene.topology.params import BackendParams
 from phiscene.topology.words import says_against_wall
 
@@ -470,14 +470,15 @@ def choose_supporters(a: Body, contacts: ObjectContacts, ancestors: dict[str, se
     return kept, info
 
 
-def _object_below(a: Body, bodies: dict[str, Body], tol: float, ground_height: float) -> tuple[str, float]:
+def _object_below(a: Body, bodies: dict[str, Body], tol: float, ground_height: float,
+                  exclude: frozenset[str] = frozenset()) -> tuple[str, float]:
     """Fallback parent of ``a``: the first upward surface below it, looking straight down, and its height.
 
-    Among upward-facing samples of other objects inside ``a``'s xy bounds and
-    at most ``tol`` above ``a``'s lowest point, the highest one names the
-    parent (the third highest sample of each object is compared, so a stray
-    sample does not decide; ties by name); the ground when there is none
-    (an object below wins even if it sank below the ground plane).
+    Among upward-facing samples of other objects (not in ``exclude``) inside
+    ``a``'s xy bounds and at most ``tol`` above ``a``'s lowest point, the
+    highest one names the parent (the third highest sample of each object is
+    compared, so a stray sample does not decide; ties by name); the ground when
+    there is none (an object below wins even if it sank below the ground plane).
 
     Returns
     -------
@@ -488,7 +489,7 @@ def _object_below(a: Body, bodies: dict[str, Body], tol: float, ground_height: f
     lo, hi = a.bounds
     for name in sorted(bodies):
         b = bodies[name]
-        if name == a.id or not aabbs_near(a.bounds[:, :2], b.bounds[:, :2], 0.0):
+        if name == a.id or name in exclude or not aabbs_near(a.bounds[:, :2], b.bounds[:, :2], 0.0):
             continue
         q = b.points[b.up.index]
         q = q[np.all((q[:, :2] >= lo[:2]) & (q[:, :2] <= hi[:2]), axis=1) & (q[:, 2] <= lo[2] + tol)]
@@ -513,10 +514,12 @@ def _confidence(gap: np.ndarray, alignment: float, tol: float) -> float:
 
 
 def supporters_of(a: Body, contacts: ObjectContacts, ancestors: dict[str, set[str]], bodies: dict[str, Body],
-                  params: GeometricParams, planes, ground_height: float) -> tuple[list[SupportEdge], dict]:
+                  params: GeometricParams, planes, ground_height: float,
+                  exclude: frozenset[str] = frozenset()) -> tuple[list[SupportEdge], dict]:
     """The support edges into one object (supporters from below, leaning on objects or on ``planes``, fallback).
 
-    An object that touches nothing falls back on the first upward surface below it; when, lowered onto it, it
+    An object that touches nothing falls back on the first upward surface below it (not one of ``exclude``: the
+    objects it carries, :func:`_supporters`); when, lowered onto it, it
     would tip and turn at least ``lean_fall_deg`` (a book or a plank standing far off any resting pose, moved
     away from what holds it by a depth error), it also leans on what it tips onto
     (:func:`phiscene.topology.leaning.floating_tipping`, :func:`phiscene.topology.leaning.tipping_partner`).
@@ -547,12 +550,13 @@ def supporters_of(a: Body, contacts: ObjectContacts, ancestors: dict[str, set[st
             why = f"{len(c)} contact samples below, median gap {100 * np.median(c.gap):.1f} cm"
         edges.append(SupportEdge(name, a.id, relation, conf, why))
     if not kept:
-        covers = {k: len(v) for k, v in contacts.cover.items() if k != GROUND and len(v) >= params.min_contact_points}
+        covers = {k: len(v) for k, v in contacts.cover.items()
+                  if k != GROUND and k not in exclude and len(v) >= params.min_contact_points}
         if covers:  # A passes through an object's upward surface (too deep to count as contact)
             parent = max(sorted(covers), key=lambda k: covers[k])
             why = "no contact within tolerance: the object whose upward surface A passes through"
         else:
-            parent, height = _object_below(a, bodies, contacts.tol[GROUND], ground_height)
+            parent, height = _object_below(a, bodies, contacts.tol[GROUND], ground_height, exclude)
             why = "no contact within tolerance: the first upward surface straight below"
         edges.append(SupportEdge(parent, a.id, "supports", params.fallback_confidence, why))
         info.update(stable=False, fallback=True)
@@ -739,18 +743,43 @@ def sunk_floor_objects(parents: dict[str, set[tuple[str, str]]], bodies: dict[st
 
 def _supporters(scene, bodies: dict[str, Body], params: GeometricParams) -> tuple[list[SupportEdge], dict, list]:
     """The support edges of every object of ``scene`` read from prepared ``bodies`` (before cycles are broken),
-    the per-object diagnostics and the floor-standing objects."""
+    the per-object diagnostics and the floor-standing objects.
+
+    An object that touches nothing takes a fallback supporter (:func:`supporters_of`), an edge of low confidence.
+    When that edge closes a cycle and cycle breaking would drop it (an object sunk into a board from above reaches
+    below the board's lowest point: the board's fallback names it), the object would be left on the ground alone
+    (a board bridging two boxes, dropped to the floor with what it carries): such an object's fallback is taken
+    again with the objects it carries through the kept edges passed over (``passed_over`` in its diagnostics).
+    A fallback edge that survives cycle breaking is kept, even on a cycle: another edge of the cycle was weaker.
+    """
+    import networkx as nx
+
     contacts = {o.id: object_contacts(bodies[o.id], bodies, scene.ground_height, params) for o in scene.objects}
     drop_mutual(contacts, bodies, params)
     ancestors = raw_ancestors(contacts, params)
-    edges: list[SupportEdge] = []
+    found: dict[str, list[SupportEdge]] = {}
     diagnostics = {}
-    for o in scene.objects:
+    bounds = {k: b.bounds for k, b in bodies.items()}
+
+    def add(o, exclude: frozenset[str] = frozenset()) -> None:
         e, info = supporters_of(bodies[o.id], contacts[o.id], ancestors, bodies, params, scene.structure,
-                                scene.ground_height)
+                                scene.ground_height, exclude)
         if says_against_wall(object_text(o)) and not any(x.relation == "leans_on" for x in e):
             e += described_leaning(bodies[o.id], scene.structure, contacts[o.id].tol[GROUND], params)
-        edges += e
-        diagnostics[o.id] = info
-    edges, floor = floor_standing(edges, scene, {k: b.bounds for k, b in bodies.items()}, params.floor_reach)
+        found[o.id], diagnostics[o.id] = e, info
+
+    for o in scene.objects:
+        add(o)
+    edges, floor = floor_standing([e for o in scene.objects for e in found[o.id]], scene, bounds, params.floor_reach)
+    kept, dropped = break_cycles(edges)
+    redo = [o for o in scene.objects if diagnostics[o.id].get("fallback") and any(
+        e.target == o.id and e.relation == "supports" and e.confidence == params.fallback_confidence for e in dropped)]
+    if redo:
+        g = nx.DiGraph([e.pair for e in kept])
+        for o in redo:
+            carried = frozenset(nx.descendants(g, o.id)) if o.id in g else frozenset()
+            add(o, carried)
+            diagnostics[o.id]["passed_over"] = sorted(carried)
+        edges, floor = floor_standing([e for o in scene.objects for e in found[o.id]], scene, bounds,
+                                      params.floor_reach)
     return edges, diagnostics, floor
