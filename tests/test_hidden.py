@@ -140,3 +140,52 @@ def test_a_hidden_object_is_not_kept_where_static_it_would_shove_what_it_touches
     # the same box just touching it (1 mm gap): kept
     _, out, rec = ground_plank(tmp_path, {"plank": 0.2}, overlap=-0.001)
     assert rec["objects"]["plank"]["settle_remedy"] == "hidden" and out.get("plank").attached == "ground"
+
+
+LIFT = 0.2  # m: the plank's lowest point above the floor, as a depth error leaves a mostly unseen object
+
+
+def ground_lifted_plank(tmp_path, neighbour: str):
+    """The tilted plank lifted ``LIFT`` above the floor, 20 % visible, touching (1 mm) one static box placed first:
+    ``beside`` it (a 1.2 m tall box at its lower side) or ``above`` it (a slab attached to a wall, over its top)."""
+    meshes = box_meshes(tmp_path, {"plank": PLANK, "tall": (0.2, 0.2, 1.2), "slab": (0.6, 0.6, 0.04)})
+    turn = trimesh.transformations.rotation_matrix(np.radians(3.0), (0.0, 1.0, 0.0))[:3, :3]
+    corners = trimesh.creation.box(PLANK).vertices @ turn.T
+    pose = make_pose(rotation=turn, translation=(0.0, 0.0, LIFT - corners[:, 2].min()))
+    if neighbour == "beside":  # its +x face 1 mm from the plank's lowest, leftmost edge
+        other = SceneObject("tall", meshes["tall"], make_pose(translation=(corners[:, 0].min() - 0.101, 0.0, 0.6)))
+        edge = SupportEdge("ground", "tall", "supports")
+    else:  # its bottom face 1 mm above the plank's highest point
+        top = LIFT - corners[:, 2].min() + corners[:, 2].max()
+        other = SceneObject("slab", meshes["slab"], make_pose(translation=(0.0, 0.0, top + 0.021)))
+        edge = SupportEdge("ground", "slab", "supports")
+    objects = [other, SceneObject("plank", meshes["plank"], pose, "plank")]
+    order = [o.id for o in objects]
+    scene = Scene(objects)
+    graph = SupportGraph(objects=order, edges=[edge, SupportEdge("ground", "plank", "supports")], order=order)
+    # no penetration stage: it would move the plank a few mm off the box, and the contact is the point
+    params = AssemblyParams.from_dict({"penetration": False, "faithful": {"enabled": True, "flush": False}})
+    out, rec = ground_scene(scene, order, convex_proxies(scene, tmp_path / "cache"), params, SimSettings(),
+                            tmp_path / "cache", graph=graph, visible=lambda: {"plank": 0.2},
+                            attached={"slab": "ground"} if neighbour == "above" else None)
+    return pose, out, rec
+
+
+def test_a_hidden_object_touching_only_a_body_beside_it_is_not_kept_in_the_air(tmp_path):
+    # kept where it was put it would rest on nothing: the tall box only touches its side
+    _, out, rec = ground_lifted_plank(tmp_path, "beside")
+    r = rec["objects"]["plank"]
+    assert r["settle_remedy"] == "closest" and out.get("plank").attached is None
+    assert rec["summary"]["hidden"] == []
+    assert out.get("plank").world_mesh().bounds[0, 2] < 0.01  # the fallback: on the floor
+
+
+def test_a_hidden_object_under_a_slab_is_lowered_onto_the_floor(tmp_path):
+    # the slab over its top does not stop the lowering: it is kept on the floor, below where it was put
+    start, out, rec = ground_lifted_plank(tmp_path, "above")
+    r = rec["objects"]["plank"]
+    assert r["settle_remedy"] == "hidden" and out.get("plank").attached == "ground"
+    pose = np.asarray(out.get("plank").pose)
+    assert 0.0 <= out.get("plank").world_mesh().bounds[0, 2] <= FaithfulParams().contact_tol / 2 + 1e-6
+    assert np.linalg.norm(pose[:2, 3] - start[:2, 3]) < 1e-9 and rotation_angle(pose[:3, :3], start[:3, :3]) < 1e-6
+    assert start[2, 3] - pose[2, 3] == pytest.approx(LIFT, abs=FaithfulParams().contact_tol / 2)

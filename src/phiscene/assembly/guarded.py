@@ -32,6 +32,10 @@ from phiscene.transforms import decompose, transform_points, turned_about
 #: When no start is accepted, at most this many fallback results are tilt-tested, in rank order, for one that holds.
 FALLBACK_TILTS = 4
 
+#: A contact whose normal (from the other body towards the object) is within 60 deg of straight up is a contact
+#: beneath the object; one within 60 deg of straight down, a body above it (remedy ``hidden``, :func:`lowered_start`).
+BENEATH_MIN_Z = 0.5
+
 #: Remedy ``centred``: shares of the way from a body's centre of mass to its carriers' that its starts move it,
 #: nearest first.
 CENTRE_FRACTIONS = (0.5, 1.0)
@@ -279,18 +283,20 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
     best = ok[0] if ok else min(tried, key=certify.fallback_rank)
     share = info["visible"]() if not ok and info.get("visible") is not None else None
     if share is not None and share < fp.hidden_share:  # nan (outside the image): no
-        # mostly unseen, and its guessed shape held by no start: kept where it was put, on what lies beneath it,
-        # unless the fallback ends nearer to the input (the corrected pose may have been carried far, or fall far
-        # when lowered), nothing is beneath it, or the placed objects it touches, released, do not stay (static,
-        # it would shove them: its convex pieces may reach into them)
+        # mostly unseen, and its guessed shape held by no start: kept where it was put, lowered onto what lies
+        # beneath it, unless the fallback ends nearer to the input (the corrected pose may have been carried far,
+        # or fall far when lowered), nothing touches it from beneath (only bodies beside or above it: kept there it
+        # would rest on nothing), or the placed objects it touches, released, do not stay (static, it would shove
+        # them: its convex pieces may reach into them)
         mass(com)
-        kept = lowered_start(world, oid, pose, context, fp.contact_tol / 2)
+        kept = lowered_start(world, oid, pose, context, fp.contact_tol / 2, skip_above=True)
         world.set_pose(oid, kept)
         near = touching()
+        beneath = [k for k, (_, n) in world.nearest(oid, context, fp.contact_tol).items() if n[2] >= BENEATH_MIN_Z]
         far = lambda p: certify.closeness(info["input"], p, info["com"], info["diag"], start=info["input"])  # noqa: E731
         world.set_static(oid)
         carriers = load_carriers(world, oid, near, info["fixed"], fp.contact_tol, fp.load_depth)
-        if near and far(kept) < far(best["result"].pose) and not (
+        if beneath and far(kept) < far(best["result"].pose) and not (
                 carriers and gives_way(world, oid, carriers, fp.load_frames, fp.joint_tol, fp.joint_tol_deg, sp)[0]):
             rec["touching"] = near
             moved, turned = window_motion(pose, kept)
@@ -397,18 +403,22 @@ def _stoppers(world, below: list[str]) -> list[str]:
     return list(dict.fromkeys([*below, *(["ground"] if "ground" in world.bodies else [])]))
 
 
-def lowered_start(world, oid: str, pose: np.ndarray, below: list[str], clearance: float) -> np.ndarray:
+def lowered_start(world, oid: str, pose: np.ndarray, below: list[str], clearance: float,
+                  skip_above: bool = False) -> np.ndarray:
     """``pose`` moved straight down until within ``clearance`` of the nearest of ``below`` (or of the ground).
 
     Each step lowers by the Euclidean gap (a lower bound of the vertical gap), so it never penetrates. The ground
     always stops it: a supporter that is no longer beneath the object (it moved, or the graph was wrong) must not
-    let it sink through the floor.
+    let it sink through the floor. ``skip_above``: a body whose nearest point lies above the object (the normal
+    there within 60 deg of straight down, :data:`BENEATH_MIN_Z`) does not stop it; moving down takes the object
+    away from it (an object put against a table top's underside is lowered to what lies beneath it).
     """
     stoppers = _stoppers(world, below)
     out = pose.copy()
     for _ in range(8):
         world.set_pose(oid, out)
-        gaps = world.distances(oid, stoppers, 1.0)
+        gaps = {k: d for k, (d, n) in world.nearest(oid, stoppers, 1.0).items()
+                if not (skip_above and n[2] <= -BENEATH_MIN_Z)}
         gap = min(gaps.values()) if gaps else 0.0
         if gap <= clearance:
             break
