@@ -292,9 +292,10 @@ class FaithfulParams(Params):
         Remedy ``hidden``: an object that no start held (it would take the ``closest`` fallback) and of which the
         photo's camera sees less than this share (:func:`phiscene.render.visible_shares` on the input scene: its
         pixels in the scene over its pixels alone) is kept where it was put, lowered onto what lies beneath it
-        (past a body above it), static, like an object fixed in place (``attached`` to the ground in the grounded
-        scene: left out of drift averages, counted with the attached objects); not when nothing touches it from
-        beneath (a contact normal within 60 deg of straight up; bodies beside or above it do not count), when the placed
+        (past the bodies beside and above it), static, like an object fixed in place (``attached`` to the ground in
+        the grounded scene: left out of drift averages, counted with the attached objects); not when nothing then
+        touches it from beneath (a contact normal within 60 deg of straight up), when lowering took it deeper into
+        a body (one beside it that widens lower down), when the placed
         objects it touches move when released with it static (:func:`~phiscene.assembly.settle.gives_way`: its
         convex pieces would shove them), or when the fallback's result is nearer to the input
         (:func:`certify.closeness` from the input, a fall below it counted: the corrected pose may have been carried

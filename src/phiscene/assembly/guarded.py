@@ -33,7 +33,7 @@ from phiscene.transforms import decompose, transform_points, turned_about
 FALLBACK_TILTS = 4
 
 #: A contact whose normal (from the other body towards the object) is within 60 deg of straight up is a contact
-#: beneath the object; one within 60 deg of straight down, a body above it (remedy ``hidden``, :func:`lowered_start`).
+#: beneath the object (remedy ``hidden``, :func:`lowered_start`).
 BENEATH_MIN_Z = 0.5
 
 #: Remedy ``centred``: shares of the way from a body's centre of mass to its carriers' that its starts move it,
@@ -284,15 +284,21 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
     share = info["visible"]() if not ok and info.get("visible") is not None else None
     if share is not None and share < fp.hidden_share:  # nan (outside the image): no
         # mostly unseen, and its guessed shape held by no start: kept where it was put, lowered onto what lies
-        # beneath it, unless the fallback ends nearer to the input (the corrected pose may have been carried far,
-        # or fall far when lowered), nothing touches it from beneath (only bodies beside or above it: kept there it
-        # would rest on nothing), or the placed objects it touches, released, do not stay (static, it would shove
-        # them: its convex pieces may reach into them)
+        # beneath it (past the bodies beside and above it: a chair tucked under a table), unless the fallback ends
+        # nearer to the input (the corrected pose may have been carried far, or fall far when lowered), nothing
+        # touches it from beneath, lowered it reaches into a body (beside it, widening lower down), or the placed
+        # objects it touches, released, do not stay (static, it would shove them: its convex pieces may reach into
+        # them)
         mass(com)
-        kept = lowered_start(world, oid, pose, context, fp.contact_tol / 2, skip_above=True)
+        world.set_pose(oid, pose)
+        overlaps = {k: d for k, (d, _) in world.nearest(oid, context, 0.0).items()}  # as it was put (m, < 0)
+        kept = lowered_start(world, oid, pose, context, fp.contact_tol / 2, beneath_only=True)
         world.set_pose(oid, kept)
         near = touching()
         beneath = [k for k, (_, n) in world.nearest(oid, context, fp.contact_tol).items() if n[2] >= BENEATH_MIN_Z]
+        if any(d < min(overlaps.get(k, 0.0), 0.0) - fp.contact_tol
+               for k, (d, _) in world.nearest(oid, context, 0.0).items()):
+            beneath = []  # lowering took it deeper into a body
         far = lambda p: certify.closeness(info["input"], p, info["com"], info["diag"], start=info["input"])  # noqa: E731
         world.set_static(oid)
         carriers = load_carriers(world, oid, near, info["fixed"], fp.contact_tol, fp.load_depth)
@@ -404,21 +410,22 @@ def _stoppers(world, below: list[str]) -> list[str]:
 
 
 def lowered_start(world, oid: str, pose: np.ndarray, below: list[str], clearance: float,
-                  skip_above: bool = False) -> np.ndarray:
+                  beneath_only: bool = False) -> np.ndarray:
     """``pose`` moved straight down until within ``clearance`` of the nearest of ``below`` (or of the ground).
 
     Each step lowers by the Euclidean gap (a lower bound of the vertical gap), so it never penetrates. The ground
     always stops it: a supporter that is no longer beneath the object (it moved, or the graph was wrong) must not
-    let it sink through the floor. ``skip_above``: a body whose nearest point lies above the object (the normal
-    there within 60 deg of straight down, :data:`BENEATH_MIN_Z`) does not stop it; moving down takes the object
-    away from it (an object put against a table top's underside is lowered to what lies beneath it).
+    let it sink through the floor. ``beneath_only``: only a body whose nearest point lies beneath the object (the
+    normal there, from the body towards the object, within 60 deg of straight up: :data:`BENEATH_MIN_Z`) stops it,
+    so an object put against a table top's underside, or against the side of the table that hides it, is lowered
+    to what lies beneath it. It may then reach into a body beside it that widens lower down: the caller checks.
     """
     stoppers = _stoppers(world, below)
     out = pose.copy()
     for _ in range(8):
         world.set_pose(oid, out)
         gaps = {k: d for k, (d, n) in world.nearest(oid, stoppers, 1.0).items()
-                if not (skip_above and n[2] <= -BENEATH_MIN_Z)}
+                if not beneath_only or n[2] >= BENEATH_MIN_Z}
         gap = min(gaps.values()) if gaps else 0.0
         if gap <= clearance:
             break
