@@ -27,7 +27,8 @@ all: $(STAMP)
 # with the install; 749 in 5 min 42 s at b958bdb in a fresh clone, 7 min 17 s with the install; 750 in 12 min 11 s
 # at ef32b2f in a fresh clone beside a 2-job workflow run, 13 min 31 s with the install; 759 in 4 min 48 s at
 # 61a757a in a fresh clone, 5 min 45 s with the install; 766 in 5 min 23 s at ddceaf4 in a fresh clone, 6 min 43 s
-# with the install).
+# with the install; 770 in 13 min 6 s at 10c4095 in a fresh clone beside a 2-job workflow run, 14 min 33 s with the
+# install).
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -n $(JOBS)
 
