@@ -295,9 +295,9 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
         kept = lowered_start(world, oid, pose, context, fp.contact_tol / 2, beneath_only=True)
         world.set_pose(oid, kept)
         near = touching()
-        beneath = [k for k, (_, n) in world.nearest(oid, context, fp.contact_tol).items() if n[2] >= BENEATH_MIN_Z]
-        if any(d < min(overlaps.get(k, 0.0), 0.0) - fp.contact_tol
-               for k, (d, _) in world.nearest(oid, context, 0.0).items()):
+        lowered = world.nearest(oid, context, fp.contact_tol)
+        beneath = [k for k, (_, n) in lowered.items() if n[2] >= BENEATH_MIN_Z]
+        if any(d < min(overlaps.get(k, 0.0), 0.0) - fp.contact_tol for k, (d, _) in lowered.items()):
             beneath = []  # lowering took it deeper into a body
         far = lambda p: certify.closeness(info["input"], p, info["com"], info["diag"], start=info["input"])  # noqa: E731
         world.set_static(oid)
