@@ -294,8 +294,8 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
         overlaps = {k: d for k, (d, _) in world.nearest(oid, context, 0.0).items()}  # as it was put (m, < 0)
         kept = lowered_start(world, oid, pose, context, fp.contact_tol / 2, beneath_only=True)
         world.set_pose(oid, kept)
-        near = touching()
         lowered = world.nearest(oid, context, fp.contact_tol)
+        near = sorted(lowered)  # what touching() reads
         beneath = [k for k, (_, n) in lowered.items() if n[2] >= BENEATH_MIN_Z]
         if any(d < min(overlaps.get(k, 0.0), 0.0) - fp.contact_tol for k, (d, _) in lowered.items()):
             beneath = []  # lowering took it deeper into a body

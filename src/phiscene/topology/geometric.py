@@ -761,6 +761,9 @@ def _supporters(scene, bodies: dict[str, Body], params: GeometricParams) -> tupl
     diagnostics = {}
     bounds = {k: b.bounds for k, b in bodies.items()}
 
+    def standing() -> tuple[list[SupportEdge], list[str]]:  # the edges found, in scene order, with the floor prior
+        return floor_standing([e for o in scene.objects for e in found[o.id]], scene, bounds, params.floor_reach)
+
     def add(o, exclude: frozenset[str] = frozenset()) -> None:
         e, info = supporters_of(bodies[o.id], contacts[o.id], ancestors, bodies, params, scene.structure,
                                 scene.ground_height, exclude)
@@ -770,7 +773,7 @@ def _supporters(scene, bodies: dict[str, Body], params: GeometricParams) -> tupl
 
     for o in scene.objects:
         add(o)
-    edges, floor = floor_standing([e for o in scene.objects for e in found[o.id]], scene, bounds, params.floor_reach)
+    edges, floor = standing()
     kept, dropped = break_cycles(edges)
     redo = [o for o in scene.objects if diagnostics[o.id].get("fallback") and any(
         e.target == o.id and e.relation == "supports" and e.confidence == params.fallback_confidence for e in dropped)]
@@ -780,6 +783,5 @@ def _supporters(scene, bodies: dict[str, Body], params: GeometricParams) -> tupl
             carried = frozenset(nx.descendants(g, o.id)) if o.id in g else frozenset()
             add(o, carried)
             diagnostics[o.id]["passed_over"] = sorted(carried)
-        edges, floor = floor_standing([e for o in scene.objects for e in found[o.id]], scene, bounds,
-                                      params.floor_reach)
+        edges, floor = standing()
     return edges, diagnostics, floor
