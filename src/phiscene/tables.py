@@ -51,7 +51,9 @@ REAL_EXTRA = ["attached", "ballasted", "bases", "settled_frac", "seconds"]
 ATTACHED_NOTE = ("Objects attached to a wall, the ceiling or the ground (``attached``) are static: they are "
                  "colliders for the others and are left out of the drift and floating averages and of the settled "
                  "fraction. They include the objects grounding kept where the input put them (remedy ``hidden``: "
-                 "mostly unseen in the photo, their guessed shape held by no start). The displacement "
+                 "mostly unseen in the photo, their guessed shape held by no start; remedy ``held``: no start "
+                 "held them and the fallback carried them across the scene; counted in the settled fraction, as not "
+                 "settled). The displacement "
                  "and rotation averages count every object of the input (an attached object with the motion the "
                  "method gives it: none for phi_scene), so that every method is averaged over the same objects. "
                  "Objects with a declared centre of mass (``ballasted``: grounding's remedy ``ballast``, for an "
@@ -192,7 +194,8 @@ def _assembly_summary(path: str | Path | None) -> dict:
     if is_failure_record(data) or "summary" not in data:
         return {"settled_frac": nan, "seconds": nan}
     s = data["summary"]
-    # static by grounding: attached, or kept where it was put (remedy hidden); attached in the grounded scene
+    # static by grounding: attached, or kept where it was put (remedy hidden); attached in the grounded scene. One
+    # kept because the fallback carried it across the scene (remedy held) is a failure to settle: counted, unsettled
     free = [r for r in data.get("objects", {}).values() if r.get("settle_remedy") not in ("attached", "hidden")]
     settled = sum(r.get("settled") is True for r in free)
     return {"settled_frac": settled / len(free) if free else nan, "seconds": float(s.get("seconds", nan))}

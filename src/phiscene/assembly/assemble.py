@@ -252,10 +252,14 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                 pose = guarded.settle_faithful(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params,
                                                fp, info, rec, masses.get(oid))
                 _kept(masses, bases, oid, rec, obj)
-                if rec["settle_remedy"] == "hidden":  # static where it was put from now on, as if attached
+                if rec["settle_remedy"] in guarded.KEPT_REMEDIES:  # static where it was put from now on, as if attached
                     attached[oid] = "ground"
-                    log.warning("%s: no start held it and %.0f %% of it is visible in the photo: kept where it "
-                                "was put, static", oid, 100 * rec["visible_share"])
+                    if rec["settle_remedy"] == "hidden":
+                        log.warning("%s: no start held it and %.0f %% of it is visible in the photo: kept where "
+                                    "it was put, static", oid, 100 * rec["visible_share"])
+                    else:
+                        log.warning("%s: no start held it and the fallback carried it across the scene: kept "
+                                    "where it was put, static, not settled", oid)
             elif params.settle:
                 pose = _settle(world, oid, obj.mesh(), proxies[oid], pose, sim, params.settle_params, rec,
                                masses.get(oid))
@@ -284,12 +288,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             if progress is not None:
                 progress(_progress_line(index, len(order), oid, rec))
     if params.faithful.enabled and params.settle and params.faithful.joint_settle_frames > 0:
-        poses = _joint_settle(_as_grounded(scene.with_poses(poses), attached, masses, bases), proxies, sim,
-                              cache_dir, params.faithful, params.settle_params, objects, coms,
-                              {o: np.asarray(scene.get(o).pose, float) for o in order})
-        if params.faithful.reground:
-            poses = _reground_collapsed(scene, order, proxies, params, sim, cache_dir, graph, attached, poses,
-                                        objects, coms, masses, bases, progress, eye)
+        poses = _joint_stage(scene, order, proxies, params, sim, cache_dir, graph, attached, poses, objects, coms,
+                             masses, bases, progress, eye)
     if params.faithful.enabled and params.settle and params.faithful.joint_frames > 0:
         _joint_check(_as_grounded(scene.with_poses(poses), attached, masses, bases), proxies, sim, cache_dir,
                      params.faithful, objects)
@@ -306,6 +306,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         summary["joint_unstable"] = [o for o, c in certs.items() if c.get("joint_stable") is False]
         summary["gross"] = certify.gross_failures(certs, params.faithful)
         summary["hidden"] = sorted(o for o, r in objects.items() if r.get("settle_remedy") == "hidden")
+        summary["held"] = sorted(o for o, r in objects.items() if r.get("settle_remedy") == "held")
         for oid, what in summary["gross"].items():
             log.warning("%s ends far from its input: %s", oid, what)
             if progress is not None:
@@ -482,6 +483,8 @@ def _progress_line(index: int, n: int, oid: str, rec: dict) -> str:
         state = "settled" if rec["settled"] else "NOT settled"
         if rec["settle_remedy"] == "hidden":
             state = f"{100 * rec['visible_share']:.0f} % visible, kept static"
+        elif rec["settle_remedy"] == "held":
+            state = "NOT settled: the fallback carried it across the scene, kept static"
         parts.append(f"{state} after {rec['settle_frames']} frames ({rec['settle_remedy']}),"
                      f" moved {rec['settle_translation']:.4f} m;")
     parts.append(f"{sum(rec['seconds'].values()):.2f} s")
@@ -634,6 +637,79 @@ def _joint_settle(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, cac
     return poses
 
 
+#: :func:`_joint_stage`: how many times joint settling is redone with the objects it threw across the scene held
+#: where sequential grounding put them (each time may throw others that were pushed by them).
+JOINT_HOLDS = 2
+
+
+def _joint_stage(scene: Scene, order: list[str], proxies: dict[str, Proxy], params: "AssemblyParams",
+                 sim: SimSettings, cache_dir: Path, graph, attached: dict[str, str], poses: dict[str, np.ndarray],
+                 objects: dict[str, dict], coms: dict[str, np.ndarray], masses: dict[str, np.ndarray],
+                 bases: dict[str, np.ndarray], progress: Callable[[str], None] | None,
+                 eye: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Joint settling (:func:`_joint_settle`) and the regrounding of what it brought down
+    (:func:`_reground_collapsed`, with ``reground``); the poses (id -> (4, 4)) the scene ends at.
+
+    With ``hold_far`` (remedy ``held``), an object that ends farther than its bound
+    (:func:`~phiscene.assembly.guarded.far_bound`) from where sequential grounding put it was thrown across the
+    scene by the release (pushed out of what it was put through: a reconstruction's chairs in its table): the
+    stage is redone from the sequential poses, ``poses``, with it held static there (attached to the ground,
+    its record's ``settled`` false, ``settle_remedy`` and the certificate's remedy ``held``, ``joint_held``: how
+    far it was thrown, m), up to :data:`JOINT_HOLDS` times. Records, declared centres of mass and bases are
+    those of sequential grounding again each time. ``attached`` and the records are updated in place.
+    """
+    fp = params.faithful
+    inputs = {o: np.asarray(scene.get(o).pose, float) for o in order}
+    sequential, saved = dict(poses), copy.deepcopy((objects, masses, bases, attached))
+    for attempt in range(JOINT_HOLDS + 1):
+        out = _joint_settle(_as_grounded(scene.with_poses(sequential), attached, masses, bases), proxies, sim,
+                            cache_dir, fp, params.settle_params, objects, coms, inputs)
+        if fp.reground:
+            out = _reground_collapsed(scene, order, proxies, params, sim, cache_dir, graph, attached, out,
+                                      objects, coms, masses, bases, progress, eye)
+        thrown = _thrown(scene, inputs, sequential, out, coms, attached, fp) if fp.hold_far > 0 else {}
+        if not thrown or attempt == JOINT_HOLDS:
+            return out
+        # again from the sequential rest, the thrown objects held there
+        for oid, distance in thrown.items():
+            saved[3][oid] = "ground"
+            saved[0][oid].update(settled=False, settle_remedy="held", joint_held=rounded(distance))
+            cert = saved[0][oid].get("certificate")
+            if cert is not None:
+                cert.update(settled=False, remedy="held")
+        for store, before in zip((objects, masses, bases, attached), copy.deepcopy(saved)):
+            store.clear()
+            store.update(before)
+        if progress is not None:
+            progress("thrown across the scene when it was released together, held where it was grounded: "
+                     + ", ".join(f"{o} ({d:.2f} m)" for o, d in thrown.items()))
+        log.warning("joint settling threw %s across the scene: held where grounded, settled again",
+                    ", ".join(thrown))
+    return out
+
+
+def _thrown(scene: Scene, inputs: dict[str, np.ndarray], sequential: dict[str, np.ndarray],
+            poses: dict[str, np.ndarray], coms: dict[str, np.ndarray], attached: dict[str, str],
+            fp: FaithfulParams) -> dict[str, float]:
+    """The free objects the joint stage threw across the scene, each with how far (m): their centre of mass ends
+    farther than their remedy-``held`` bound (:func:`~phiscene.assembly.guarded.far_bound` of the bounding-box
+    diagonal) from where ``sequential`` put it, and farther from ``inputs`` than it was there (a regrounded object
+    brought back near its input is not thrown). Poses id -> (4, 4); ``coms``: id -> (3,) local."""
+    out = {}
+    for oid in poses:
+        if oid in attached or oid not in coms:
+            continue
+        obj = scene.get(oid)
+        diag = float(np.linalg.norm(obj.mesh().extents) * decompose(obj.pose)[2])
+        at = {k: resting.com_world(p[oid], coms[oid]) for k, p in (("end", poses), ("seq", sequential),
+                                                                  ("input", inputs))}
+        moved = float(np.linalg.norm(at["end"] - at["seq"]))
+        if (moved > guarded.far_bound(diag, fp)
+                and np.linalg.norm(at["end"] - at["input"]) > np.linalg.norm(at["seq"] - at["input"])):
+            out[oid] = moved
+    return out
+
+
 def _collapsed(rec: dict, fp: FaithfulParams) -> bool:
     """Whether joint settling undid an object's placement: it turned past ``max_stable_angle`` (toppled) or moved
     farther than ``reground_move`` (fell) when the whole scene was released."""
@@ -702,7 +778,7 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
         return poses
     kept = []
     # the first joint settling's rest, to go back to if releasing the regrounded scene brings it down
-    before, saved = dict(poses), copy.deepcopy((objects, masses, bases))
+    before, saved = dict(poses), copy.deepcopy((objects, masses, bases, attached))
     for oid in collapsed:
         obj = scene.get(oid)
         initial = np.asarray(obj.pose, dtype=float)
@@ -733,6 +809,16 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
             kept.append(oid)
             _kept(masses, bases, oid, rec, obj)
             cert = objects[oid].get("certificate")
+            if rec["settle_remedy"] in guarded.KEPT_REMEDIES:  # kept where it was put, static: as if attached
+                attached[oid] = "ground"  # no joint settling moves it now: its record is final here
+                total, turned = window_motion(initial, new)
+                objects[oid].update(displacement=rounded(total), rotation_change=rounded(turned),
+                                    settled=rec["settled"], settle_remedy=rec["settle_remedy"])
+                if cert is not None:
+                    com = coms[oid]
+                    cert.update(settled=rec["settled"], rotation_change=rounded(np.degrees(turned), 6),
+                                displacement=rounded(float(np.linalg.norm(resting.com_world(new, com)
+                                                                          - resting.com_world(initial, com)))))
             if cert is not None:
                 cert["remedy"] = f"{cert['remedy']}+reground"
                 cert["touching"] = rec.get("touching", cert["touching"])
@@ -742,7 +828,7 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
                             fp, params.settle_params, objects, coms,
                             {o: np.asarray(scene.get(o).pose, float) for o in order})
     sunk_after = _sunk(scene, settled, proxies, bases, free, fp.contact_tol)
-    fallen = [o for o in free if _collapsed(objects[o], fp) or o in sunk_after]
+    fallen = [o for o in free if o not in attached and (_collapsed(objects[o], fp) or o in sunk_after)]
     if not fallen or sunk - sunk_after:
         return settled
 
@@ -755,7 +841,9 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
     # released together, the scene with the regrounded objects collapsed (a vase put back on a dish tips the dish
     # over, and what stands on it): the regrounded poses are undone, the first joint settling's rest is kept
     attempts = {oid: rec["reground"] for oid, rec in objects.items() if "reground" in rec}
-    restored, masses_before, bases_before = saved
+    restored, masses_before, bases_before, attached_before = saved
+    attached.clear()
+    attached.update(attached_before)
     objects.clear()
     objects.update(restored)
     masses.clear()

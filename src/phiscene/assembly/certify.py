@@ -110,7 +110,7 @@ def certificate(settled: bool | None, remedy: str, below: list[str], leaning: li
     remedy
         What produced the final pose: ``none``, ``extra_frames``, ``damping`` (the paper's remedies),
         ``stable``, ``damped``, ``shifted`` (faithful retries), ``closest`` (no start was accepted: the closest settled
-        result), ``attached``.
+        result), ``attached``, ``hidden`` and ``held`` (kept static where it was put; :mod:`phiscene.assembly.guarded`).
     below, leaning
         The graph's supporters of the object from below (``supports``, ``contains``) and those it leans on.
     touching

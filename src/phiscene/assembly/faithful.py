@@ -81,6 +81,8 @@ same SDF and settling stages (:func:`phiscene.assembly.assemble.ground_scene`):
    simulator would not leave it. The one exception is an object mostly unseen in the photo (``hidden_share``):
    instead of that fallback it is kept where it was put, static and attached to the ground (``hidden``), when
    something is beneath it, what it touches stays when released and the fallback ends no nearer to the input.
+   So is, on the same conditions, an object that the fallback would carry across the scene (``hold_far``: farther
+   than its own size and ``onto_reach``), reported as not settled (``held``).
 4. **Joint settling**. The sequentially grounded scene is released as a
    whole until every object is at rest (``joint_settle_frames``): a
    supporter is never tested under the load put on it later in the order.
@@ -303,6 +305,17 @@ class FaithfulParams(Params):
         not show (a chair tucked under a table, seen by its backrest), and what holds it is in that unseen part:
         its guessed shape topples from every start, and the fallback throws it tens of centimetres. 0 = off;
         without the photo's camera, off.
+    hold_far
+        Remedy ``held``: an object no start held whose fallback (the result ranked first, above) went farther than
+        this many times its bounding-box diagonal, and farther than ``onto_reach``, from where its start put it (its
+        centre of mass, horizontally, or falling) is kept where it was put as remedy ``hidden`` keeps one, on the
+        same conditions, seen or not and with or without the photo's camera: static, attached to the ground in the
+        grounded scene (left out of drift averages, counted with the attached objects), and reported as not
+        settled (its record's ``settled`` false, the summary's ``held``), the fallback's motion in its reason.
+        Settling would carry it across the scene: a reconstruction's chair pushed out of the table it was put
+        through, thrown metres, a ball rolling down a ramp; no nearby rest exists on the shape and supporters it
+        was given, and where the simulator would leave it is neither the photo's scene nor a rest the photo
+        supports. A plank that topples over on the spot moves less than its size and takes the fallback. 0 = off.
     """
 
     _label = "faithful parameters"
@@ -349,6 +362,7 @@ class FaithfulParams(Params):
     ray_max_shift: float = 0.15
     ray_min_pitch: float = 10.0
     hidden_share: float = 0.5
+    hold_far: float = 1.0
 
     def check(self) -> None:
         """Reject negative bounds, an unknown ``carry_sideways`` and ``retry_damping`` outside [0, 1)
@@ -357,7 +371,7 @@ class FaithfulParams(Params):
                     "joint_settle_frames", "joint_frames", "joint_drop", "joint_tol", "joint_tol_deg", "max_slide",
                     "max_slide_frac", "max_turn", "contact_tol", "retry_rolling_friction", "max_shift",
                     "shift_directions", "onto_reach", "planar_floor", "floor_lift", "load_frames", "reground_move",
-                    "carry_margin"):
+                    "carry_margin", "hold_far"):
             if getattr(self, key) < 0:
                 raise ValueError(f"faithful parameter {key!r} must be >= 0, got {getattr(self, key)}")
         if self.carry_sideways not in CARRY_SIDEWAYS:

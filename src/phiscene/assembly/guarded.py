@@ -36,6 +36,10 @@ FALLBACK_TILTS = 4
 #: beneath the object (remedy ``hidden``, :func:`lowered_start`).
 BENEATH_MIN_Z = 0.5
 
+#: Remedies that keep an object static where it was put (attached to the ground in the grounded scene): ``hidden``
+#: (settled: its unseen part holds it) and ``held`` (not settled: the fallback carried it across the scene).
+KEPT_REMEDIES = ("hidden", "held")
+
 #: Remedy ``centred``: shares of the way from a body's centre of mass to its carriers' that its starts move it,
 #: nearest first.
 CENTRE_FRACTIONS = (0.5, 1.0)
@@ -132,7 +136,7 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
         stayed = ok and not lost
         # a gross failure: turned beyond any resting pose tried, or went farther than the onto remedy moves
         gross = certify.gross_failure(moved, turned, fp)
-        out = {"label": label, "result": result, "frames": frames, "gross": gross, "turned": turned,
+        out = {"label": label, "result": result, "frames": frames, "gross": gross, "turned": turned, "moved": moved,
                "ok": stayed and result.settled and robust and not gave, "lost": bool(lost), "robust": robust,
                "loaded": not gave,
                "stayed": stayed, "in_place": in_place, "travel": moved if not lost else math.inf,
@@ -282,9 +286,13 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
                 break
     best = ok[0] if ok else min(tried, key=certify.fallback_rank)
     share = info["visible"]() if not ok and info.get("visible") is not None else None
-    if share is not None and share < fp.hidden_share:  # nan (outside the image): no
-        # mostly unseen, and its guessed shape held by no start: kept where it was put, lowered onto what lies
-        # beneath it (past the bodies beside and above it: a chair tucked under a table), unless the fallback ends
+    hidden = share is not None and share < fp.hidden_share  # nan (outside the image): no
+    # the fallback carried it across the scene (remedy held)
+    carried_off = not ok and fp.hold_far > 0 and best["moved"] > far_bound(info["diag"], fp)
+    if hidden or carried_off:
+        # mostly unseen, and its guessed shape held by no start (or the fallback carried it across the scene):
+        # kept where it was put, lowered onto what lies beneath it (past the bodies beside and above it: a chair
+        # tucked under a table), unless the fallback ends
         # nearer to the input (the corrected pose may have been carried far, or fall far when lowered), nothing
         # touches it from beneath, lowered it reaches into a body (beside it, widening lower down), or the placed
         # objects it touches, released, do not stay (static, it would shove them: its convex pieces may reach into
@@ -307,10 +315,15 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
             rec["touching"] = near
             moved, turned = window_motion(pose, kept)
             reason = "; ".join(f"{t['label']}: {t['why']}" for t in tried)
-            rec.update(settle_frames=sum(t["frames"] for t in tried), settled=True, settle_remedy="hidden",
+            if hidden:
+                why, extra = f"kept: {share:.0%} visible", {"visible_share": rounded(share)}
+            else:
+                why, extra = (f"kept: the fallback ({best['label']}) went {best['moved']:.2f} m, farther than "
+                              f"{far_bound(info['diag'], fp):.2f} m"), {}
+            rec.update(settle_frames=sum(t["frames"] for t in tried), settled=bool(hidden),
+                       settle_remedy="hidden" if hidden else "held",
                        residual_translation=0.0, residual_rotation=0.0, settle_translation=rounded(moved),
-                       settle_rotation=rounded(turned), reason=f"{reason}; kept: {share:.0%} visible",
-                       attempts=len(tried), visible_share=rounded(share))
+                       settle_rotation=rounded(turned), reason=f"{reason}; {why}", attempts=len(tried), **extra)
             return kept
     result = best["result"]
     source = best.get("source", best)  # a centred start: the attempt whose rest it moved, body and turn included
@@ -341,6 +354,12 @@ def settle_faithful(world, oid: str, mesh, proxy: Proxy, pose: np.ndarray, sim: 
                settle_translation=rounded(moved), settle_rotation=rounded(turned), reason=reason,
                attempts=len(tried))
     return final
+
+
+def far_bound(diag: float, fp: FaithfulParams) -> float:
+    """Remedy ``held``'s bound (m) for an object whose bounding-box diagonal is ``diag`` (m): ``hold_far`` times
+    ``diag``, at least ``onto_reach`` (:class:`~phiscene.assembly.faithful.FaithfulParams`)."""
+    return max(fp.hold_far * diag, fp.onto_reach)
 
 
 def _unflushed(world, oid: str, pose: np.ndarray, info: dict, below: list[str], clearance: float) -> np.ndarray:
