@@ -8,6 +8,8 @@ beneath (the ramp's normal is ``SLOPE`` from vertical, well within 60 deg).
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 import torch
@@ -97,3 +99,51 @@ def test_thrown_objects_are_those_the_release_took_past_their_bound_and_away_fro
     fp = FaithfulParams()
     assert _thrown(scene, inputs, sequential, final, coms, {}, fp) == {"thrown": pytest.approx(0.31)}
     assert _thrown(scene, inputs, sequential, final, coms, {"thrown": "ground"}, fp) == {}
+
+
+def test_the_joint_stage_is_redone_with_what_it_threw_held_at_its_sequential_rest(tmp_path, monkeypatch):
+    # the joint release stubbed: it throws "a" 1 m whenever "a" is free, and "b" 1 m whenever "a" is held (as the
+    # objects pushed by a held one are); "c" never moves. The stage must hold "a", then "b", each at its sequential
+    # rest with its record marked, and stop there: a third pass is not needed
+    from phiscene.assembly import assemble
+
+    cube = save_mesh(trimesh.creation.box((0.1, 0.1, 0.1)), tmp_path / "cube.obj")
+    at = lambda x: make_pose(translation=(x, 0.0, 0.05))  # noqa: E731
+    scene = Scene([SceneObject(o, cube, at(x)) for o, x in (("a", 0.0), ("b", 1.0), ("c", 2.0))])
+    order = ["a", "b", "c"]
+    sequential = {o: np.asarray(scene.get(o).pose, float) for o in order}
+    passes = []
+
+    def fake_joint(grounded, proxies, sim, cache_dir, fp, sp, objects, coms, inputs):
+        fixed = {o.id for o in grounded.objects if o.attached is not None}
+        passes.append(sorted(fixed))
+        poses = {o.id: np.asarray(o.pose, float) for o in grounded.objects}
+        thrower = "b" if "a" in fixed else "a"
+        if thrower not in fixed:
+            poses[thrower] = poses[thrower] @ make_pose(translation=(0.0, 1.0, 0.0))
+            objects[thrower]["joint_settle"] = [1.0, 0.0]
+        return poses
+
+    monkeypatch.setattr(assemble, "_joint_settle", fake_joint)
+    record = {"settled": True, "settle_remedy": "none", "certificate": {"settled": True, "remedy": "none"}}
+    objects = {o: copy.deepcopy(record) for o in order}
+    attached: dict = {}
+    params = AssemblyParams.from_dict({"faithful": {"enabled": True, "reground": False}})
+    lines = []
+    out = assemble._joint_stage(scene, order, {}, params, SimSettings(), tmp_path, None, attached, dict(sequential),
+                                objects, {o: np.zeros(3) for o in order}, {}, {}, lines.append)
+    assert passes == [[], ["a"], ["a", "b"]]
+    assert attached == {"a": "ground", "b": "ground"}
+    for oid in ("a", "b"):
+        assert np.allclose(out[oid], sequential[oid])
+        assert objects[oid]["settled"] is False and objects[oid]["settle_remedy"] == "held"
+        assert objects[oid]["joint_held"] == pytest.approx(1.0) and objects[oid]["certificate"]["remedy"] == "held"
+        assert "joint_settle" not in objects[oid]  # the records of the sequential rest, marked
+    assert objects["c"] == record
+    assert len(lines) == 2 and "a (1.00 m)" in lines[0] and "b (1.00 m)" in lines[1]
+    # off: the release's rest, whatever it threw
+    attached, passes[:] = {}, []
+    params = AssemblyParams.from_dict({"faithful": {"enabled": True, "reground": False, "hold_far": 0.0}})
+    out = assemble._joint_stage(scene, order, {}, params, SimSettings(), tmp_path, None, attached, dict(sequential),
+                                {o: {} for o in order}, {o: np.zeros(3) for o in order}, {}, {}, None)
+    assert passes == [[]] and attached == {} and np.linalg.norm(out["a"][:3, 3] - sequential["a"][:3, 3]) == 1.0
