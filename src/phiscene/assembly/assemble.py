@@ -508,7 +508,6 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
     leaning = any(e.relation == "leans_on" for e in edges)
     below = [e.source for e in edges if e.relation in BELOW] or (["ground"] if not edges else [])
     mesh = obj.mesh()
-    _, _, scale = decompose(obj.pose)
     points = fixtures.shape_points(proxy, mesh)
     hull = trimesh.convex.convex_hull(points)
     com = np.asarray(hull.center_mass, dtype=float)
@@ -526,10 +525,15 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
     return {"parents": parents, "below": below, "leaning": leaning_ids, "up": up, "normals": normals, "com": com,
             "flushable": flushable, "given_base": obj.base is not None, "flush_angle": 0.0,
             "flush_rotation": np.eye(3),
-            "diag": float(np.linalg.norm(mesh.extents) * scale),
+            "diag": _diagonal(obj),
             "placed": list(poses), "input": np.asarray(obj.pose, dtype=float),
             "walls": [q for q in scene.structure if q.kind == "wall"], "cache_dir": cache_dir,
             "points": points, "below_world": parents_world}
+
+
+def _diagonal(obj) -> float:
+    """Bounding-box diagonal (m) of an object's mesh at its pose's scale."""
+    return float(np.linalg.norm(obj.mesh().extents) * decompose(obj.pose)[2])
 
 
 def _surfaces(scene: Scene, poses: dict[str, np.ndarray], names: list[str], seed: int,
@@ -622,16 +626,10 @@ def _joint_settle(scene: Scene, proxies: dict[str, Proxy], sim: SimSettings, cac
         rec = objects[oid]
         settle_motion = window_motion(np.asarray(scene.get(oid).pose, dtype=float), poses[oid])
         rec["joint_settle"] = [rounded(settle_motion[0]), rounded(np.degrees(settle_motion[1]), 6)]
-        total, turned = window_motion(inputs[oid], poses[oid])
-        rec.update(displacement=rounded(total), rotation_change=rounded(turned))
+        _record_motion(rec, inputs[oid], poses[oid], coms.get(oid))
         cert = rec.get("certificate")
-        if cert is not None:
-            com = coms[oid]
-            cert["displacement"] = rounded(float(np.linalg.norm(resting.com_world(poses[oid], com)
-                                                                - resting.com_world(inputs[oid], com))))
-            cert["rotation_change"] = rounded(np.degrees(turned), 6)
-            if beyond(settle_motion, fp.joint_tol, fp.joint_tol_deg):
-                cert["remedy"] = f"{cert['remedy']}+joint"
+        if cert is not None and beyond(settle_motion, fp.joint_tol, fp.joint_tol_deg):
+            cert["remedy"] = f"{cert['remedy']}+joint"
     log.info("joint settling: %d frames, %s", frames,
              "all at rest" if log_["all_settled"] else f"not at rest: {', '.join(log_['unsettled'])}")
     return poses
@@ -677,9 +675,7 @@ def _joint_stage(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             cert = saved[0][oid].get("certificate")
             if cert is not None:
                 cert.update(settled=False, remedy="held")
-        for store, before in zip((objects, masses, bases, attached), copy.deepcopy(saved)):
-            store.clear()
-            store.update(before)
+        _restore((objects, masses, bases, attached), saved)
         if progress is not None:
             progress("thrown across the scene when it was released together, held where it was grounded: "
                      + ", ".join(f"{o} ({d:.2f} m)" for o, d in thrown.items()))
@@ -699,8 +695,7 @@ def _thrown(scene: Scene, inputs: dict[str, np.ndarray], sequential: dict[str, n
     for oid in poses:
         if oid in attached or oid not in coms:
             continue
-        obj = scene.get(oid)
-        diag = float(np.linalg.norm(obj.mesh().extents) * decompose(obj.pose)[2])
+        diag = _diagonal(scene.get(oid))
         at = {k: resting.com_world(p[oid], coms[oid]) for k, p in (("end", poses), ("seq", sequential),
                                                                   ("input", inputs))}
         moved = float(np.linalg.norm(at["end"] - at["seq"]))
@@ -708,6 +703,26 @@ def _thrown(scene: Scene, inputs: dict[str, np.ndarray], sequential: dict[str, n
                 and np.linalg.norm(at["end"] - at["input"]) > np.linalg.norm(at["seq"] - at["input"])):
             out[oid] = moved
     return out
+
+
+def _record_motion(rec: dict, initial: np.ndarray, pose: np.ndarray, com: np.ndarray | None) -> None:
+    """Set an object's record's ``displacement`` and ``rotation_change`` from ``initial`` to ``pose`` ((4, 4)), and
+    its certificate's (centre-of-mass displacement with ``com``, (3,) local; deg), when it has one."""
+    total, turned = window_motion(initial, pose)
+    rec.update(displacement=rounded(total), rotation_change=rounded(turned))
+    cert = rec.get("certificate")
+    if cert is not None:
+        cert["displacement"] = rounded(float(np.linalg.norm(resting.com_world(pose, com)
+                                                            - resting.com_world(initial, com))))
+        cert["rotation_change"] = rounded(np.degrees(turned), 6)
+
+
+def _restore(stores: tuple[dict, ...], saved: tuple[dict, ...]) -> None:
+    """Put a deep copy of each of ``saved`` back into the dict of ``stores`` at its place, in place (the records,
+    declared centres of mass, bases and attachments of a grounding undone)."""
+    for store, before in zip(stores, copy.deepcopy(saved)):
+        store.clear()
+        store.update(before)
 
 
 def _collapsed(rec: dict, fp: FaithfulParams) -> bool:
@@ -811,14 +826,10 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
             cert = objects[oid].get("certificate")
             if rec["settle_remedy"] in guarded.KEPT_REMEDIES:  # kept where it was put, static: as if attached
                 attached[oid] = "ground"  # no joint settling moves it now: its record is final here
-                total, turned = window_motion(initial, new)
-                objects[oid].update(displacement=rounded(total), rotation_change=rounded(turned),
-                                    settled=rec["settled"], settle_remedy=rec["settle_remedy"])
+                objects[oid].update(settled=rec["settled"], settle_remedy=rec["settle_remedy"])
+                _record_motion(objects[oid], initial, new, coms.get(oid))
                 if cert is not None:
-                    com = coms[oid]
-                    cert.update(settled=rec["settled"], rotation_change=rounded(np.degrees(turned), 6),
-                                displacement=rounded(float(np.linalg.norm(resting.com_world(new, com)
-                                                                          - resting.com_world(initial, com)))))
+                    cert["settled"] = rec["settled"]
             if cert is not None:
                 cert["remedy"] = f"{cert['remedy']}+reground"
                 cert["touching"] = rec.get("touching", cert["touching"])
@@ -841,15 +852,7 @@ def _reground_collapsed(scene: Scene, order: list[str], proxies: dict[str, Proxy
     # released together, the scene with the regrounded objects collapsed (a vase put back on a dish tips the dish
     # over, and what stands on it): the regrounded poses are undone, the first joint settling's rest is kept
     attempts = {oid: rec["reground"] for oid, rec in objects.items() if "reground" in rec}
-    restored, masses_before, bases_before, attached_before = saved
-    attached.clear()
-    attached.update(attached_before)
-    objects.clear()
-    objects.update(restored)
-    masses.clear()
-    masses.update(masses_before)
-    bases.clear()
-    bases.update(bases_before)
+    _restore((objects, masses, bases, attached), saved)
     for oid, attempt in attempts.items():
         objects[oid]["reground"] = {**attempt, "kept": False, "undone": fallen} if oid in kept else attempt
     if progress is not None:
