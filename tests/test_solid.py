@@ -218,3 +218,31 @@ def test_a_solid_that_cannot_cover_the_mesh_is_not_decomposed(monkeypatch):
     assert route == "decomposed" and calls == [len(shell.faces)]
     _, outside, _ = fidelity(mesh, hulls)
     assert outside <= ProxyParams().solid_tolerance * float(np.linalg.norm(mesh.extents))
+
+
+def test_a_solid_route_lost_is_not_tried_again_by_the_finer_decomposition(monkeypatch, tmp_path):
+    """The ball with a fin above loses its solid route whatever the hull cap (the fin lies outside the solid's
+    convex hull). With a stand-in decomposition that uses its whole cap and reaches far beyond the mesh, the
+    first set (2 hulls) is refined (8); the refinement does not try the solid route again, and gives the hulls
+    that trying it gives (the oracle: the same refinement with the solid route tried)."""
+    import phiscene.proxies as proxies
+
+    ball, _ = double_wall(radius=0.1, wall=0.004, subdivisions=3)
+    fin = trimesh.creation.box((0.16, 0.001, 0.06))
+    fin.apply_translation((0.1, 0.0, 0.0))
+    path = tmp_path / "finned.obj"
+    trimesh.util.concatenate([ball, fin]).export(path)
+    fat = trimesh.creation.box((0.5, 0.5, 0.5)).vertices  # reaches 0.15 m and more beyond the 0.1 m ball
+    monkeypatch.setattr(proxies, "_decompose", lambda m, p: [fat + 1e-3 * k for k in range(p.max_hulls)])
+    tried = []
+    real_solid = proxies._decompose_solid
+    monkeypatch.setattr(proxies, "_decompose_solid", lambda *a: tried.append(a[3].max_hulls) or real_solid(*a))
+    params = ProxyParams(convex_tolerance=0.0, max_hulls=2, refine_max_hulls=8)
+    px = proxies.proxy_for_mesh(path, params, tmp_path / "cache")
+    assert tried == [2]  # the first decomposition only
+    assert px.meta["refined"]["hulls"] == 2 and len(px.hulls) == 8 and px.meta["solid"] == "skipped"
+    first = proxies._decomposition(proxies.load_mesh(path), px.meta["mesh_hash"], params, tmp_path / "cache")
+    assert first.meta["solid"] == "lost"
+    oracle, route = decompose_route(proxies.load_mesh(path), ProxyParams(convex_tolerance=0.0, max_hulls=8))
+    assert tried == [2, 8] and route == "decomposed"
+    assert [h.tolist() for h in oracle] == [h.tolist() for h in px.hulls]

@@ -281,44 +281,56 @@ def decompose(mesh: trimesh.Trimesh, params: ProxyParams) -> list[np.ndarray]:
     return decompose_route(mesh, params)[0]
 
 
-def decompose_route(mesh: trimesh.Trimesh, params: ProxyParams) -> tuple[list[np.ndarray], str]:
+def decompose_route(mesh: trimesh.Trimesh, params: ProxyParams, solid: bool = True) -> tuple[list[np.ndarray], str]:
     """Convex decomposition of a local-frame mesh, and the route it took (:data:`ROUTES`).
 
     The mesh is first reduced to its outer shell (:func:`phiscene.solid.outer_shell`: the cavity of a hollow
     reconstruction is part of the object) and decimated (``max_faces``, :func:`decimated_unit_free`); a nearly
     convex one
     (``convex_tolerance``) gets its convex hull; a hollow one is decomposed as the closed surface of its solid
-    when that covers it (``solid_resolution``); anything else goes to the backend.
+    when that covers it (``solid_resolution``; not tried when ``solid`` is false); anything else goes to the
+    backend.
 
     Returns
     -------
     hulls : list of (v, 3) float
     route : str
     """
+    hulls, route, _ = _decompose_routed(mesh, params, solid)
+    return hulls, route
+
+
+def _decompose_routed(mesh: trimesh.Trimesh, params: ProxyParams,
+                      solid: bool) -> tuple[list[np.ndarray], str, bool]:
+    """:func:`decompose_route`, and whether the solid route was tried and lost part of the mesh."""
     if params.backend == "convex":
-        return [np.asarray(mesh.convex_hull.vertices, dtype=float)], "convex"
-    hulls, route = _routed(mesh, params, params.decomposition_vertices())
+        return [np.asarray(mesh.convex_hull.vertices, dtype=float)], "convex", False
+    hulls, route, lost = _routed(mesh, params, params.decomposition_vertices(), solid)
     # each piece cut to its final budget once its route is chosen: a coverage test on the cut pieces would reject
     # the solid route for what the cut leaves uncovered
-    return [cut_hull(h, params.max_hull_vertices) for h in hulls], route
+    return [cut_hull(h, params.max_hull_vertices) for h in hulls], route, lost
 
 
-def _routed(mesh: trimesh.Trimesh, params: ProxyParams, vertices: int) -> tuple[list[np.ndarray], str]:
-    """:func:`decompose_route`'s routes, each piece through :func:`fit_to_mesh` with at most ``vertices``."""
+def _routed(mesh: trimesh.Trimesh, params: ProxyParams, vertices: int,
+            solid: bool = True) -> tuple[list[np.ndarray], str, bool]:
+    """:func:`decompose_route`'s routes, each piece through :func:`fit_to_mesh` with at most ``vertices``, and
+    whether the solid route was tried and lost part of the mesh."""
     from phiscene.solid import outer_shell
 
     shell = outer_shell(mesh)
     diagonal = _diagonal(mesh)
     work = decimated_faithfully(shell, params.max_faces, params.decimation_tolerance * diagonal, params.seed)
     if params.convex_tolerance > 0 and hull_excess(work, seed=params.seed) <= params.convex_tolerance:
-        return fit_to_mesh([mesh.convex_hull.vertices], mesh, vertices), "single_hull"
-    if params.solid_resolution and params.backend == "coacd" and shell is not mesh:
+        return fit_to_mesh([mesh.convex_hull.vertices], mesh, vertices), "single_hull", False
+    lost = False
+    if solid and params.solid_resolution and params.backend == "coacd" and shell is not mesh:
         tol = params.solid_tolerance * diagonal
         hulls = fit_to_mesh(_decompose_solid(shell, mesh, tol, params), mesh, vertices)
         if hulls and max_outside(mesh, hulls, seed=params.seed) <= tol:
-            return hulls, "solid"
+            return hulls, "solid", False
         log.info("solid route lost part of the mesh; decomposing the surface instead")
-    return fit_to_mesh(_decompose(work, params), mesh, vertices), "decomposed"
+        lost = True
+    return fit_to_mesh(_decompose(work, params), mesh, vertices), "decomposed", lost
 
 
 def fit_to_mesh(hulls: list[np.ndarray], mesh: trimesh.Trimesh, max_vertices: int) -> list[np.ndarray]:
@@ -573,6 +585,11 @@ def proxy_for_mesh(mesh_file: str | Path, params: ProxyParams, cache_dir: str | 
     A decomposition routed through CoACD that used all ``max_hulls`` and reaches farther beyond the mesh than
     ``refine_excess`` of its diagonal is decomposed again with ``refine_max_hulls`` (cached too); the set with
     the smaller excess is returned, its ``meta["refined"]`` recording the first one's hull count and excess.
+    When the first decomposition tried the solid route and it lost part of the mesh, the second does not try it
+    (its meta's ``solid`` is ``skipped``): more pieces cut closer to the solid's surface and cover no more of the
+    mesh. On the 36 objects of the `real` and REST3D-baseline suites whose first solid route was lost and that
+    were refined, the second was lost too every time, after a CoACD run on the solid's surface (14 s of the
+    128 s of `custom_room1`'s basket).
     """
     mesh = load_mesh(mesh_file)
     mh = mesh_hash(mesh)
@@ -580,7 +597,9 @@ def proxy_for_mesh(mesh_file: str | Path, params: ProxyParams, cache_dir: str | 
     if not (params.refines() and first.meta.get("route") in DECOMPOSED_ROUTES
             and len(first.hulls) >= params.max_hulls and first.excess > params.refine_excess * _diagonal(mesh)):
         return first
-    finer = _decomposition(mesh, mh, replace(params, max_hulls=params.refine_max_hulls), cache_dir)
+    # a solid route that lost part of the mesh is not tried again with more pieces (``solid`` in the meta)
+    finer = _decomposition(mesh, mh, replace(params, max_hulls=params.refine_max_hulls), cache_dir,
+                           solid=first.meta.get("solid") != "lost")
     log.info("%s: %d hulls reach %.4f m beyond it; with up to %d: %d hulls, %.4f m", Path(mesh_file).name,
              len(first.hulls), first.excess, params.refine_max_hulls, len(finer.hulls), finer.excess)
     best = finer if finer.excess < first.excess else first
@@ -588,9 +607,11 @@ def proxy_for_mesh(mesh_file: str | Path, params: ProxyParams, cache_dir: str | 
     return replace(best, seconds=first.seconds + finer.seconds, meta={**best.meta, "refined": refined})
 
 
-def _decomposition(mesh: trimesh.Trimesh, mh: str, params: ProxyParams, cache_dir: str | Path) -> Proxy:
+def _decomposition(mesh: trimesh.Trimesh, mh: str, params: ProxyParams, cache_dir: str | Path,
+                   solid: bool = True) -> Proxy:
     """One decomposition of ``mesh`` (content hash ``mh``) with its fidelity, from the cache or computed and
-    cached."""
+    cached. ``solid`` false: the solid route is not tried (:func:`decompose_route`); the meta's ``solid`` says
+    ``lost`` when it was tried and lost part of the mesh, ``skipped`` when it was not tried for that reason."""
     import time
 
     ph = params.digest()
@@ -599,10 +620,12 @@ def _decomposition(mesh: trimesh.Trimesh, mh: str, params: ProxyParams, cache_di
     if cached is not None:
         return cached
     t0 = time.perf_counter()
-    hulls, route = decompose_route(mesh, params)
+    hulls, route, lost = _decompose_routed(mesh, params, solid)
     ratio, outside, excess = fidelity(mesh, hulls)
     meta = {"mesh_hash": mh, "params_hash": ph, "content_hash": hulls_hash(hulls), "route": route,
             "faces": int(len(mesh.faces))}
+    if lost or not solid:
+        meta["solid"] = "lost" if lost else "skipped"
     proxy = Proxy(hulls=hulls, volume_ratio=ratio, max_outside=outside, excess=excess,
                   seconds=time.perf_counter() - t0, meta=meta)
     write_proxies(path, {"_": proxy})
