@@ -296,3 +296,33 @@ def test_roundtrip_of_a_scene_with_a_wall_an_attached_poster_and_a_leaning_plank
     assert check["ok"], {e: (check[e]["max_diff_trans"], check[e]["max_diff_rot"]) for e in ("pybullet", "mujoco")}
     index = json.loads((tmp_path / "out" / "scene_urdf.json").read_text())
     assert {o["id"]: o["fixed"] for o in index["objects"]} == {"plank": False, "poster": True}
+
+
+def test_cli_export_of_a_workflow_result_takes_the_proxies_and_graph_it_was_grounded_with(bridge, tmp_path, capsys,
+                                                                                         monkeypatch):
+    # the workflow's layout: the grounded scene and its assembly log in one folder, the proxies and the support graph
+    # it was grounded with elsewhere; export names neither and is run from another folder
+    from phiscene.cli import main
+    from phiscene.pipeline import run_ground
+    from phiscene.proxies import write_proxies
+
+    root = tmp_path / "wf"
+    proxies, graph = root / "results/proxies/s/x.npz", root / "results/topology/given/s/x.json"
+    proxies.parent.mkdir(parents=True)
+    write_proxies(proxies, bridge["proxies"])
+    graph.parent.mkdir(parents=True)
+    topology.save(bridge["graph"], graph)
+    grounded = root / "results/methods/m/s/x"
+    monkeypatch.chdir(root)
+    run_ground(bridge["scene"].source, graph.relative_to(root), proxies.relative_to(root), grounded / "scene.json",
+               grounded / "assembly.json", {}, {}, tmp_path / "cache")
+    assert json.loads((grounded / "assembly.json").read_text())["proxies"] == "results/proxies/s/x.npz"
+    monkeypatch.chdir(tmp_path)
+    rc = main(["export", str(grounded), str(tmp_path / "out"), "--no-check", "--cache-dir", str(tmp_path / "cache")])
+    out = capsys.readouterr().out
+    assert rc == 0
+    assert f"proxies the scene was grounded with: {proxies}" in out
+    assert f"support graph the scene was grounded with: {graph}" in out
+    assert not (tmp_path / "out" / "proxies.npz").exists()  # nothing computed
+    exported = json.loads((tmp_path / "out" / "support_graph.json").read_text())
+    assert {(e["from"], e["to"]) for e in exported["edges"]} == {(e.source, e.target) for e in bridge["graph"].edges}

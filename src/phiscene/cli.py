@@ -9,7 +9,7 @@
                            [--no-level] [--no-walls]
     phiscene import-rest3d ROOT SCENE OUT_DIR [--variant sam3d|ours|dc|gen3dsr|sg] [--no-level] [--no-walls]
     phiscene import-front3d ROOT OUT_DIR [--room SCENE_ID ...] [--test-rooms 1000] [--initial PATTERN]
-    phiscene export SCENE_JSON OUT_DIR [--proxies P.npz] [--topology T.json] [--no-check] [--demo]
+    phiscene export SCENE_JSON OUT_DIR [--proxies P.npz] [--topology T.json] [--suite real] [--no-check] [--demo]
 
 Settings come from a workflow config file (``--config``; default ``config/config.yaml`` if present in the
 working directory, else the workflow's default config as shipped with the package, :func:`phiscene.config.
@@ -244,6 +244,29 @@ def cmd_bench(args: argparse.Namespace) -> None:
     print(f"wrote {args.out_dir}")
 
 
+def _grounded_with(scene: Path) -> dict[str, Path]:
+    """The proxies and support graph a settled scene was grounded with, as its ``assembly.json`` (beside it, written
+    by :func:`phiscene.pipeline.run_ground`) names them: ``{"proxies": path, "topology": path}``, the files that
+    still exist only. A relative path is taken as it stands (the workflow's folder), else under each folder above
+    the scene (an export run from elsewhere)."""
+    log_path = scene.parent / "assembly.json"
+    try:
+        record = json.loads(log_path.read_text())
+    except (OSError, ValueError):
+        return {}
+    found = {}
+    for key in ("proxies", "topology"):
+        value = record.get(key) if isinstance(record, dict) else None
+        if not isinstance(value, str) or not value:
+            continue
+        path = Path(value)
+        tries = [path] if path.is_absolute() else [path, *(d / path for d in scene.resolve().parents)]
+        hit = next((t for t in tries if t.is_file()), None)
+        if hit is not None:
+            found[key] = hit
+    return found
+
+
 def cmd_export(args: argparse.Namespace) -> None:
     from phiscene import pipeline
     from phiscene.io.export import FILES, run_export
@@ -252,17 +275,31 @@ def cmd_export(args: argparse.Namespace) -> None:
     scene = _scene_file(Path(args.scene))
     out = Path(args.out_dir)
     cache = Path(args.cache_dir or cfg.get("cache_dir", out / ".cache"))
-    # `phiscene ground` writes the scene's proxies and support graph beside it: taken unless others are given
-    beside = {name: scene.parent / name for name in ("proxies.npz", "topology.json")}
-    proxies = Path(args.proxies) if args.proxies else beside["proxies.npz"]
-    if args.proxies or proxies.is_file():
+    # the proxies and support graph the scene was grounded with, unless others are given: beside it (as `phiscene
+    # ground` writes them), else those its assembly log names (a workflow result); other proxies than the
+    # grounding's can overlap where the grounding's touched, and the round trip then fails
+    beside = {name.split(".")[0]: scene.parent / name for name in ("proxies.npz", "topology.json")}
+    recorded = _grounded_with(scene)
+    proxies = Path(args.proxies) if args.proxies else beside["proxies"]
+    if not args.proxies and not proxies.is_file() and "proxies" in recorded:
+        proxies = recorded["proxies"]
+        print(f"[1/3] proxies the scene was grounded with: {proxies}", flush=True)
+    elif args.proxies or proxies.is_file():
         print(f"[1/3] proxies: {proxies}", flush=True)
     else:
         proxies = out / "proxies.npz"
-        print(f"[1/3] proxies for {scene}", flush=True)
-        pipeline.run_proxies(scene, proxies, cfg.get("proxies", {}), cache)
-    topology = Path(args.topology) if args.topology else beside["topology.json"]
-    if args.topology or topology.is_file():
+        settings = _proxy_settings(cfg, args.suite, args.proxy_profile)
+        hint = None if args.suite is not None or args.proxy_profile else _reconstruction_hint(cfg, scene)
+        if hint:
+            print(hint, file=sys.stderr, flush=True)
+        print(f"[1/3] proxies for {scene} (not those it was grounded with: none found; --proxies names them)",
+              flush=True)
+        pipeline.run_proxies(scene, proxies, settings, cache)
+    topology = Path(args.topology) if args.topology else beside["topology"]
+    if not args.topology and not topology.is_file() and "topology" in recorded:
+        topology = recorded["topology"]
+        print(f"[2/3] support graph the scene was grounded with: {topology}", flush=True)
+    elif args.topology or topology.is_file():
         print(f"[2/3] support graph: {topology}", flush=True)
     else:
         topology = out / "topology.json"
@@ -472,9 +509,14 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("scene", help="scene.json or its folder (a settled scene)")
     e.add_argument("out_dir", help="output folder")
     e.add_argument("--proxies", help="convex proxies .npz of the scene (default: proxies.npz beside the scene, as "
-                                     "phiscene ground writes it, else computed with the config's settings)")
-    e.add_argument("--topology", help="support graph JSON (default: topology.json beside the scene, else inferred "
-                                      "with the geometric backend)")
+                                     "phiscene ground writes it, else the file its assembly.json names (a workflow "
+                                     "result), else computed with the config's settings)")
+    e.add_argument("--topology", help="support graph JSON (default: topology.json beside the scene, else the file "
+                                      "its assembly.json names, else inferred with the geometric backend)")
+    which = e.add_mutually_exclusive_group()
+    which.add_argument("--suite", help="proxies computed here take this suite's settings (as ground --suite)")
+    which.add_argument("--proxy-profile", metavar="NAME", help="proxies computed here take this proxy profile (as "
+                                                               "ground --proxy-profile)")
     e.add_argument("--no-check", action="store_true", help="skip the round-trip release in pybullet and MuJoCo")
     e.add_argument("--demo", action="store_true", help="also throw a ball into the export: OUT_DIR/demo.gif")
     e.set_defaults(func=cmd_export)

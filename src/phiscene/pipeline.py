@@ -89,7 +89,9 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
     settled, record = ground_scene(scene, graph.order, proxies, params, SimSettings.from_dict(sim), Path(cache_dir),
                                    progress=progress or log.info, graph=graph, attached=fixed, eye=eye,
                                    visible=visible)
+    # what it was grounded with, for `phiscene export` (its round trip tests the scene against these contacts)
     record["topology"] = str(topology_path)
+    record["proxies"] = str(proxies_path)
     write_json(out_log, record)
     save_scene(settled, out_scene)
 
