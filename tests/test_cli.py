@@ -39,6 +39,7 @@ def test_ground_command_fixes_penetration_and_floating(tmp_path):
     np.testing.assert_allclose(out.get("cube").pose[2, 3], 0.15, atol=1e-3)
     metrics = phiscene("metrics", str(tmp_path / "out/scene.json"), "--config", str(cfg), cwd=tmp_path)
     assert metrics.returncode == 0, metrics.stderr
+    assert f"proxies the scene was grounded with: {tmp_path / 'out/proxies.npz'}" in metrics.stderr
     m = json.loads(metrics.stdout)
     assert m["pen_depth"] < 1e-3 and m["drift_trans"] < 1e-3
     # the export takes the proxies and the support graph grounding wrote beside the scene (recomputing them took a

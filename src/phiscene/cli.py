@@ -1,7 +1,7 @@
 """The ``phiscene`` command: run single stages outside Snakemake.
 
     phiscene ground SCENE_DIR OUT_DIR [--topology geometric|height|given] [--suite real] [--config config/config.yaml]
-    phiscene metrics SCENE_JSON [--suite real] [--config ...]
+    phiscene metrics SCENE_JSON [--proxies P.npz | --suite real] [--config ...]
     phiscene bench OUT_DIR [--suite contact] [--index 0] [--config ...]
     phiscene failures [RESULTS_DIR] [--why]
     phiscene import-sam3d IN_DIR OUT_DIR [--floor NX NY NZ D] [--unit-scale 1] [--no-walls]
@@ -219,10 +219,19 @@ def cmd_metrics(args: argparse.Namespace) -> None:
     cfg = _config(args.config)
     scene = _scene_file(Path(args.scene))
     cache = Path(args.cache_dir or cfg.get("cache_dir", Path(tempfile.gettempdir()) / "phiscene-cache"))
+    # the proxies the scene was grounded with, as `phiscene export` finds them (the workflow's metrics use those)
+    given = Path(args.proxies) if args.proxies else None
+    if given is None and args.suite is None and args.proxy_profile is None:
+        beside = scene.parent / "proxies.npz"
+        given = beside if beside.is_file() else _grounded_with(scene).get("proxies")
+        if given is not None:
+            print(f"proxies the scene was grounded with: {given}", file=sys.stderr, flush=True)
     with tempfile.TemporaryDirectory() as tmp:
-        pipeline.run_proxies(scene, Path(tmp) / "p.npz", _proxy_settings(cfg, args.suite, args.proxy_profile), cache)
+        proxies = given or Path(tmp) / "p.npz"
+        if given is None:
+            pipeline.run_proxies(scene, proxies, _proxy_settings(cfg, args.suite, args.proxy_profile), cache)
         settings = {"physical": cfg.get("metrics", {}).get("physical", {}), "sim": cfg.get("sim", {})}
-        result = scene_metrics(scene, ["physical"], MetricInputs(proxies=Path(tmp) / "p.npz", cache_dir=cache),
+        result = scene_metrics(scene, ["physical"], MetricInputs(proxies=proxies, cache_dir=cache),
                                settings)["physical"]
     summary = {k: result[k] for k in ("pen_depth", "float_dist", "drift_trans", "drift_rot")}
     print(json.dumps(result if args.full else summary, indent=1))
@@ -442,8 +451,11 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("scene", help="scene.json or its folder")
     m.add_argument("--full", action="store_true", help="print per-object values too")
     which = m.add_mutually_exclusive_group()
-    which.add_argument("--suite", help="take the proxy settings of this suite of the config (as ground --suite)")
-    which.add_argument("--proxy-profile", metavar="NAME", help="take this proxy profile (as ground --proxy-profile)")
+    which.add_argument("--proxies", help="convex proxies .npz of the scene (default: those it was grounded with, as "
+                                         "export finds them, else computed with the config's settings)")
+    which.add_argument("--suite", help="compute the proxies with this suite's settings (as ground --suite)")
+    which.add_argument("--proxy-profile", metavar="NAME", help="compute the proxies with this proxy profile (as "
+                                                               "ground --proxy-profile)")
     m.set_defaults(func=cmd_metrics)
 
     b = sub.add_parser("bench", help="build one embedded benchmark scene")
