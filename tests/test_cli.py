@@ -32,6 +32,11 @@ def test_ground_command_fixes_penetration_and_floating(tmp_path):
     assert res.returncode == 0, res.stderr
     assert "[3/3] grounding" in res.stdout
     out = load_scene(tmp_path / "out/scene.json")
+    # the closing line: how far each box's centre (its frame's origin) moved from the input, and which moved most
+    moved = {o.id: float(np.linalg.norm(o.pose[:3, 3] - scene.get(o.id).pose[:3, 3])) for o in out.objects}
+    far = max(moved, key=moved.get)
+    assert (f"result: 2 of 2 objects settled; from the input: moved {100 * np.mean(list(moved.values())):.1f} cm on "
+            f"average, {100 * moved[far]:.1f} cm at most ({far}), turned 0.0 deg") in res.stdout, res.stdout
     log = json.loads((tmp_path / "out/assembly.json").read_text())
     assert log["order"] == ["base", "cube"]
     # oracle: boxes resting flat -> base centre at 0.05, cube centre at 0.1 + 0.05

@@ -69,6 +69,7 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
     """
     from phiscene import topology
     from phiscene.assembly.assemble import AssemblyParams, ground_scene
+    from phiscene.assembly.outcome import outcome_line
     from phiscene.render import camera_eye, read_camera, visible_shares
     from phiscene.topology.attached import attached_ids
 
@@ -94,6 +95,7 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
     record["proxies"] = str(proxies_path)
     write_json(out_log, record)
     save_scene(settled, out_scene)
+    (progress or log.info)(outcome_line(settled, scene, record))
 
 
 def run_baseline(kind: str, scene_path: str | Path, out_scene: str | Path, out_log: str | Path, params: dict,
