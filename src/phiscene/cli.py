@@ -170,8 +170,14 @@ def cmd_ground(args: argparse.Namespace) -> None:
                             "scene.json over the input); pass another folder")
     cache = Path(args.cache_dir or cfg.get("cache_dir", out / "cache"))
     methods = cfg.get("methods") or {}
+    notes: list[str] = []
     if args.method == "phi_scene" and "phi_scene" not in methods:  # a config without it: its assembly section
         assembly, backend = cfg.get("assembly", {}), args.topology or "geometric"
+        if not (assembly.get("faithful") or {}).get("enabled", False):
+            notes.append("note: the config has no methods.phi_scene: grounding with its assembly section, which "
+                         "leaves faithful grounding off (the paper's loop); pass the workflow's config/config.yaml "
+                         "first and yours second (--config config/config.yaml --config FILE) to change only what "
+                         "yours sets")
     elif args.method not in methods or methods[args.method].get("kind") != "phi_scene":
         names = sorted(k for k, v in methods.items() if v.get("kind") == "phi_scene")
         raise PhisceneError(f"--method {args.method!r}: not a phi_scene-kind method of the config ({', '.join(names)})")
@@ -182,8 +188,8 @@ def cmd_ground(args: argparse.Namespace) -> None:
         backend = args.topology or methods[args.method].get("topology", "geometric")
     proxy_settings = _proxy_settings(cfg, args.suite, args.proxy_profile)
     hint = None if args.suite is not None or args.proxy_profile else _reconstruction_hint(cfg, scene)
-    if hint:
-        print(hint, file=sys.stderr, flush=True)
+    for note in notes + ([hint] if hint else []):
+        print(note, file=sys.stderr, flush=True)
     given = Path(args.given) if args.given else scene.parent.parent / "gt" / "topology.json"
     if backend == "given" and not given.is_file():
         raise PhisceneError(f"{given}: topology file not found (pass --given FILE)")
