@@ -29,8 +29,8 @@ def outcome_line(grounded: Scene, initial: Scene, record: dict) -> str:
     Returns
     -------
     e.g. ``"result: 11 of 11 objects settled; from the input: moved 4.3 cm on average, 6.6 cm at most (jug),
-    turned 9.9 deg on average, 14.8 deg at most (pear)"`` followed by the objects held, hidden, attached, still
-    moving and far from their input, where there are any.
+    turned 9.9 deg on average, 14.8 deg at most"`` followed by the objects not settled, held, hidden, attached,
+    still moving and far from their input, where there are any.
     """
     s = record.get("summary", {})
     parts = [f"result: {s.get('settled', 0)} of {s.get('objects', len(initial.objects))} objects settled"]
@@ -45,5 +45,5 @@ def outcome_line(grounded: Scene, initial: Scene, record: dict) -> str:
     lists = [("not settled", s.get("unsettled")), ("kept static, carried too far otherwise", s.get("held")),
              ("kept static, mostly unseen", s.get("hidden")), ("attached", s.get("attached")),
              ("moving in the final release", s.get("joint_unstable")), ("far from the input", s.get("gross"))]
-    parts += [f"{what}: {', '.join(sorted(ids))}" for what, ids in lists if ids]
+    parts += [f"{what}: {', '.join(sorted(names))}" for what, names in lists if names]
     return "; ".join(parts)
