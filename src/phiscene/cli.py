@@ -198,7 +198,8 @@ def cmd_ground(args: argparse.Namespace) -> None:
         raise PhisceneError(f"{camera}: camera file not found")
     topo = cfg.get("topology", {})
     stages = [
-        ("proxies", lambda: pipeline.run_proxies(scene, out / "proxies.npz", proxy_settings, cache)),
+        ("proxies", lambda: pipeline.run_proxies(scene, out / "proxies.npz", proxy_settings, cache,
+                                                 progress=lambda msg: print(f"      {msg}", flush=True))),
         (f"topology ({backend})", lambda: pipeline.run_topology(
             scene, out / "topology.json", backend, topo.get(backend, {}), given_path=given if backend == "given"
             else None, attached=topo.get("attached", {}), cache_dir=cache)),
@@ -309,7 +310,7 @@ def cmd_export(args: argparse.Namespace) -> None:
             print(hint, file=sys.stderr, flush=True)
         print(f"[1/3] proxies for {scene} (not those it was grounded with: none found; --proxies names them)",
               flush=True)
-        pipeline.run_proxies(scene, proxies, settings, cache)
+        pipeline.run_proxies(scene, proxies, settings, cache, progress=lambda msg: print(f"      {msg}", flush=True))
     topology = Path(args.topology) if args.topology else beside["topology"]
     if not args.topology and not topology.is_file() and "topology" in recorded:
         topology = recorded["topology"]

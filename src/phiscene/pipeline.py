@@ -21,16 +21,23 @@ from phiscene.solid import use_disk_cache
 log = logging.getLogger(__name__)
 
 
-def run_proxies(scene_path: str | Path, out_path: str | Path, params: dict, cache_dir: str | Path) -> None:
-    """Convex proxies of every object of a scene -> one ``.npz`` keyed by object id."""
+def run_proxies(scene_path: str | Path, out_path: str | Path, params: dict, cache_dir: str | Path,
+                progress: Callable[[str], None] | None = None) -> None:
+    """Convex proxies of every object of a scene -> one ``.npz`` keyed by object id.
+
+    ``progress`` gets one line per object as it is done (default: the log): a cold decomposition of a 30k-face
+    reconstruction takes seconds to minutes an object.
+    """
     use_disk_cache(cache_dir)
     scene = load_scene(scene_path)
     pp = ProxyParams.from_dict(params)
     proxies = {}
-    for o in scene.objects:
+    for k, o in enumerate(scene.objects):
         px = proxies[o.id] = proxy_for_mesh(o.mesh_path, pp, cache_dir)
-        log.info("%s: %d hulls, volume ratio %.3f, max outside %.4f m, excess %.4f m, %.2f s", o.id, len(px.hulls),
-                 px.volume_ratio, px.max_outside, px.excess, px.seconds)
+        n = len(px.hulls)
+        (progress or log.info)(f"({k + 1}/{len(scene.objects)}) {o.id}: {n} hull{'' if n == 1 else 's'}, volume ratio "
+                               f"{px.volume_ratio:.3f}, max outside {px.max_outside:.4f} m, excess {px.excess:.4f} m, "
+                               f"{px.seconds:.2f} s")
     write_proxies(out_path, proxies)
 
 
