@@ -139,3 +139,21 @@ def test_import_placed_command_takes_the_camera(tmp_path):
     res = phiscene("import-placed", str(folder), str(tmp_path / "bad"), "--camera", str(tmp_path / "bad.json"))
     assert res.returncode == 1 and res.stderr.strip().count("\n") == 0 and "apart" in res.stderr, res.stderr
     assert not (tmp_path / "bad").exists()
+
+
+def test_a_folder_without_meshes_says_where_they_are(tmp_path):
+    import trimesh
+
+    from phiscene.io.placed import read_placed_dir
+
+    (tmp_path / "scene/meshes").mkdir(parents=True)
+    trimesh.creation.box([0.1, 0.1, 0.1]).export(tmp_path / "scene/meshes/cube.glb")
+    with pytest.raises(InputError, match=re.escape(f"has them: pass {tmp_path / 'scene/meshes'}")):
+        read_placed_dir(tmp_path / "scene")
+    (tmp_path / "run/chair").mkdir(parents=True)
+    (tmp_path / "run/chair/pose.json").write_text("{}")
+    with pytest.raises(InputError, match="import-sam3d"):
+        read_placed_dir(tmp_path / "run")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match=r"in the folder$"):
+        read_placed_dir(tmp_path / "empty")

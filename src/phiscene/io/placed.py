@@ -189,6 +189,16 @@ def placement_matrix(entry, where: Path, key: str) -> np.ndarray:
     return T
 
 
+def _where_the_meshes_are(folder: Path) -> str:
+    """A hint for a folder without mesh files: the SAM 3D Objects run it holds (``<id>/pose.json``), or the one
+    sub-folder that holds the meshes (a REST3D scene's ``sam3d/meshes``); empty when there is neither."""
+    subs = [d for d in sorted(folder.iterdir()) if d.is_dir()]
+    if any((d / "pose.json").is_file() for d in subs):
+        return "; its sub-folders hold a SAM 3D Objects run (<object id>/pose.json): `phiscene import-sam3d` reads it"
+    meshes = [d for d in subs if any(p.suffix.lower() in MESH_SUFFIXES for p in d.iterdir())]
+    return f"; its sub-folder {meshes[0].name}/ has them: pass {meshes[0]}" if len(meshes) == 1 else ""
+
+
 def read_placed_dir(folder: str | Path, placements: str | Path | dict | None = None) -> list[PlacedObject]:
     """The objects of a folder of mesh files placed in one frame.
 
@@ -209,7 +219,8 @@ def read_placed_dir(folder: str | Path, placements: str | Path | dict | None = N
         raise InputError(folder, None, "folder not found")
     files = sorted(p for p in folder.iterdir() if p.suffix.lower() in MESH_SUFFIXES)
     if not files:
-        raise InputError(folder, None, f"no mesh files ({', '.join(MESH_SUFFIXES)}) in the folder")
+        raise InputError(folder, None, f"no mesh files ({', '.join(MESH_SUFFIXES)}) in the folder"
+                         + _where_the_meshes_are(folder))
     where = folder
     if isinstance(placements, (str, Path)):
         where = Path(placements)
