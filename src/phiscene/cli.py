@@ -188,8 +188,10 @@ def cmd_ground(args: argparse.Namespace) -> None:
         backend = args.topology or methods[args.method].get("topology", "geometric")
     proxy_settings = _proxy_settings(cfg, args.suite, args.proxy_profile)
     hint = None if args.suite is not None or args.proxy_profile else _reconstruction_hint(cfg, scene)
-    for note in notes + ([hint] if hint else []):
-        print(note, file=sys.stderr, flush=True)
+    for note in notes:  # with the progress lines: stderr holds only the one line of an error
+        print(note, flush=True)
+    if hint:
+        print(hint, file=sys.stderr, flush=True)
     given = Path(args.given) if args.given else scene.parent.parent / "gt" / "topology.json"
     if backend == "given" and not given.is_file():
         raise PhisceneError(f"{given}: topology file not found (pass --given FILE)")
@@ -231,8 +233,6 @@ def cmd_metrics(args: argparse.Namespace) -> None:
     if given is None and args.suite is None and args.proxy_profile is None:
         beside = scene.parent / "proxies.npz"
         given = beside if beside.is_file() else _grounded_with(scene).get("proxies")
-        if given is not None:
-            print(f"proxies the scene was grounded with: {given}", file=sys.stderr, flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         proxies = given or Path(tmp) / "p.npz"
         if given is None:
@@ -241,6 +241,8 @@ def cmd_metrics(args: argparse.Namespace) -> None:
         result = scene_metrics(scene, ["physical"], MetricInputs(proxies=proxies, cache_dir=cache),
                                settings)["physical"]
     summary = {k: result[k] for k in ("pen_depth", "float_dist", "drift_trans", "drift_rot")}
+    if given is not None and not args.proxies:  # after the work: an error stays the only line on stderr
+        print(f"proxies the scene was grounded with: {given}", file=sys.stderr, flush=True)
     print(json.dumps(result if args.full else summary, indent=1))
 
 
