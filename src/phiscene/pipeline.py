@@ -100,9 +100,10 @@ def run_ground(scene_path: str | Path, topology_path: str | Path, proxies_path: 
     # what it was grounded with, for `phiscene export` (its round trip tests the scene against these contacts)
     record["topology"] = str(topology_path)
     record["proxies"] = str(proxies_path)
+    line = outcome_line(settled, scene, record)  # before the outputs: nothing may fail once they are written
     write_json(out_log, record)
     save_scene(settled, out_scene)
-    (progress or log.info)(outcome_line(settled, scene, record))
+    (progress or log.info)(line)
 
 
 def run_baseline(kind: str, scene_path: str | Path, out_scene: str | Path, out_log: str | Path, params: dict,
