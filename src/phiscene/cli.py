@@ -231,8 +231,7 @@ def cmd_metrics(args: argparse.Namespace) -> None:
     # the proxies the scene was grounded with, as `phiscene export` finds them (the workflow's metrics use those)
     given = Path(args.proxies) if args.proxies else None
     if given is None and args.suite is None and args.proxy_profile is None:
-        beside = scene.parent / "proxies.npz"
-        given = beside if beside.is_file() else _grounded_with(scene).get("proxies")
+        given = _grounded_with(scene, "proxies.npz")
     with tempfile.TemporaryDirectory() as tmp:
         proxies = given or Path(tmp) / "p.npz"
         if given is None:
@@ -262,27 +261,27 @@ def cmd_bench(args: argparse.Namespace) -> None:
     print(f"wrote {args.out_dir}")
 
 
-def _grounded_with(scene: Path) -> dict[str, Path]:
-    """The proxies and support graph a settled scene was grounded with, as its ``assembly.json`` (beside it, written
-    by :func:`phiscene.pipeline.run_ground`) names them: ``{"proxies": path, "topology": path}``, the files that
-    still exist only. A relative path is taken as it stands (the workflow's folder), else under each folder above
-    the scene (an export run from elsewhere)."""
-    log_path = scene.parent / "assembly.json"
+def _grounded_with(scene: Path, name: str) -> Path | None:
+    """The file ``name`` (``proxies.npz``, ``topology.json``) a settled scene was grounded with, or ``None``.
+
+    Beside the scene (``phiscene ground`` writes them there), else the one its ``assembly.json`` names (key ``proxies``
+    or ``topology``, written by :func:`phiscene.pipeline.run_ground`; a workflow result), if it still exists. A
+    relative path there is taken as it stands (the workflow's folder), else under each folder above the scene (a
+    command run from elsewhere).
+    """
+    beside = scene.parent / name
+    if beside.is_file():
+        return beside
     try:
-        record = json.loads(log_path.read_text())
+        record = json.loads((scene.parent / "assembly.json").read_text())
     except (OSError, ValueError):
-        return {}
-    found = {}
-    for key in ("proxies", "topology"):
-        value = record.get(key) if isinstance(record, dict) else None
-        if not isinstance(value, str) or not value:
-            continue
-        path = Path(value)
-        tries = [path] if path.is_absolute() else [path, *(d / path for d in scene.resolve().parents)]
-        hit = next((t for t in tries if t.is_file()), None)
-        if hit is not None:
-            found[key] = hit
-    return found
+        return None
+    value = record.get(name.split(".")[0]) if isinstance(record, dict) else None
+    if not isinstance(value, str) or not value:
+        return None
+    path = Path(value)
+    tries = [path] if path.is_absolute() else [path, *(d / path for d in scene.resolve().parents)]
+    return next((t for t in tries if t.is_file()), None)
 
 
 def cmd_export(args: argparse.Namespace) -> None:
@@ -296,14 +295,10 @@ def cmd_export(args: argparse.Namespace) -> None:
     # the proxies and support graph the scene was grounded with, unless others are given: beside it (as `phiscene
     # ground` writes them), else those its assembly log names (a workflow result); other proxies than the
     # grounding's can overlap where the grounding's touched, and the round trip then fails
-    beside = {name.split(".")[0]: scene.parent / name for name in ("proxies.npz", "topology.json")}
-    recorded = _grounded_with(scene)
-    proxies = Path(args.proxies) if args.proxies else beside["proxies"]
-    if not args.proxies and not proxies.is_file() and "proxies" in recorded:
-        proxies = recorded["proxies"]
-        print(f"[1/3] proxies the scene was grounded with: {proxies}", flush=True)
-    elif args.proxies or proxies.is_file():
-        print(f"[1/3] proxies: {proxies}", flush=True)
+    proxies = Path(args.proxies) if args.proxies else _grounded_with(scene, "proxies.npz")
+    if proxies is not None:
+        plain = args.proxies or proxies.parent == scene.parent  # given, or beside the scene
+        print(f"[1/3] proxies{'' if plain else ' the scene was grounded with'}: {proxies}", flush=True)
     else:
         proxies = out / "proxies.npz"
         settings = _proxy_settings(cfg, args.suite, args.proxy_profile)
@@ -313,12 +308,10 @@ def cmd_export(args: argparse.Namespace) -> None:
         print(f"[1/3] proxies for {scene} (not those it was grounded with: none found; --proxies names them)",
               flush=True)
         pipeline.run_proxies(scene, proxies, settings, cache, progress=lambda msg: print(f"      {msg}", flush=True))
-    topology = Path(args.topology) if args.topology else beside["topology"]
-    if not args.topology and not topology.is_file() and "topology" in recorded:
-        topology = recorded["topology"]
-        print(f"[2/3] support graph the scene was grounded with: {topology}", flush=True)
-    elif args.topology or topology.is_file():
-        print(f"[2/3] support graph: {topology}", flush=True)
+    topology = Path(args.topology) if args.topology else _grounded_with(scene, "topology.json")
+    if topology is not None:
+        plain = args.topology or topology.parent == scene.parent
+        print(f"[2/3] support graph{'' if plain else ' the scene was grounded with'}: {topology}", flush=True)
     else:
         topology = out / "topology.json"
         print("[2/3] support graph (geometric)", flush=True)
