@@ -157,3 +157,85 @@ def test_a_folder_without_meshes_says_where_they_are(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(InputError, match=r"in the folder$"):
         read_placed_dir(tmp_path / "empty")
+
+
+def _scene_file(path: Path) -> dict:
+    """A glTF scene as exporters write one: a wrapper node over the objects, a table of five part nodes under its
+    own placed node, a book rotated by its node. Returns each object's world vertices (source frame), built here
+    from the primitives and the node transforms."""
+    import trimesh
+    from trimesh.transformations import rotation_matrix, translation_matrix
+
+    s = trimesh.Scene()
+    s.graph.update(frame_from=s.graph.base_frame, frame_to="Root", matrix=translation_matrix((0.0, 0.0, -1.5)))
+    table_at = translation_matrix((0.3, 0.0, -0.2))
+    s.graph.update(frame_from="Root", frame_to="wooden table", matrix=table_at)
+    parts = {"top": ((1.2, 0.05, 0.8), (0.0, 0.75, 0.0))}
+    parts.update({f"leg{i}": ((0.05, 0.725, 0.05), (x, 0.3625, z))
+                  for i, (x, z) in enumerate([(-0.5, -0.3), (0.5, -0.3), (-0.5, 0.3), (0.5, 0.3)])})
+    table = []
+    for name, (extents, at) in parts.items():
+        box = trimesh.creation.box(extents)
+        s.add_geometry(box, node_name=name, geom_name=name, parent_node_name="wooden table",
+                       transform=translation_matrix(at))
+        table.append(trimesh.transform_points(box.vertices, translation_matrix((0.3, 0.0, -1.7)) @
+                                              translation_matrix(at)))
+    book = trimesh.creation.box((0.2, 0.04, 0.15))
+    book_at = translation_matrix((0.4, 0.795, -0.2)) @ rotation_matrix(0.5, (0.0, 1.0, 0.0))
+    s.add_geometry(book, node_name="book", geom_name="book", parent_node_name="Root", transform=book_at)
+    s.export(path)
+    return {"wooden_table": np.vstack(table),
+            "book": trimesh.transform_points(book.vertices, translation_matrix((0.0, 0.0, -1.5)) @ book_at)}
+
+
+def test_a_scene_file_imports_one_object_per_top_level_node(tmp_path, caplog):
+    """`phiscene import-placed SCENE.glb OUT`: each node under the exporter's wrapper is an object, its parts merged
+    in the file's frame (the world vertices of the construction, y-up taken to z-up); the same file alone in a
+    folder is one object with a warning naming its nodes, and `--objects nodes` (`objects: nodes` in a suite) reads
+    its nodes; a PLY cannot be a scene file."""
+    from phiscene.io.placed import PlacedParams, import_placed, read_placed_dir, read_scene_file
+    from phiscene.transforms import Y_UP_TO_Z_UP
+
+    folder = tmp_path / "suite" / "room"
+    folder.mkdir(parents=True)
+    truth = _scene_file(folder / "room.glb")
+    objects = read_scene_file(folder / "room.glb")
+    assert [o.id for o in objects] == ["book", "wooden_table"]
+    assert [o.description for o in objects] == ["book", "wooden table"]
+    for o in objects:
+        assert len(o.mesh.vertices) == len(truth[o.id])
+        assert np.allclose(np.sort(o.mesh.vertices, axis=0), np.sort(truth[o.id], axis=0), atol=1e-6)
+    scene = import_placed(objects, tmp_path / "out", PlacedParams(level=False))
+    for o in scene.objects:
+        world = o.mesh().copy().apply_transform(o.pose)
+        expected = truth[o.id] @ Y_UP_TO_Z_UP[:3, :3].T
+        assert np.allclose(world.bounds, [expected.min(axis=0), expected.max(axis=0)], atol=1e-6)
+        assert o.meta["source_node"] in ("book", "wooden table")
+
+    with caplog.at_level("WARNING"):
+        merged = read_placed_dir(folder)
+    assert [o.id for o in merged] == ["room"] and "holds 2 top-level nodes (book, wooden table)" in caplog.text
+    nodes = read_placed_dir(folder, objects="nodes")
+    assert [o.id for o in nodes] == ["book", "wooden_table"]
+    run_placed_scene({"root": str(tmp_path / "suite"), "kind": "placed", "objects": "nodes",
+                      "params": {"level": False}}, "room", tmp_path / "suite_out")
+    assert load_scene(tmp_path / "suite_out" / "initial" / "scene.json").ids == ["book", "wooden_table"]
+
+    def phiscene(*args):
+        return subprocess.run([sys.executable, "-m", "phiscene.cli", *args], capture_output=True, text=True,
+                              cwd=tmp_path, timeout=300)
+
+    res = phiscene("import-placed", str(folder / "room.glb"), str(tmp_path / "cli"), "--no-level")
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert load_scene(tmp_path / "cli" / "initial" / "scene.json").ids == ["book", "wooden_table"]
+    res = phiscene("import-placed", str(folder / "room.glb"), str(tmp_path / "cli2"), "--objects", "files")
+    assert res.returncode == 1 and res.stderr.strip().count("\n") == 0 and "scene file" in res.stderr, res.stderr
+
+    objects[0].mesh.export(tmp_path / "book.ply")
+    with pytest.raises(InputError, match=r"book.ply: its nodes cannot be read as objects"):
+        read_scene_file(tmp_path / "book.ply")
+    with pytest.raises(InputError, match=r"placements for objects without a mesh: \['lamp'\]"):
+        read_scene_file(folder / "room.glb", {"wooden table": np.eye(4).tolist(), "lamp": np.eye(4).tolist()})
+    shutil.copy(folder / "room.glb", folder / "room2.glb")
+    with pytest.raises(InputError, match=r"room2.glb: object id 'book' is also the id of room.glb:book"):
+        read_placed_dir(folder, objects="nodes")

@@ -5,8 +5,8 @@
     phiscene bench OUT_DIR [--suite contact] [--index 0] [--config ...]
     phiscene failures [RESULTS_DIR] [--why]
     phiscene import-sam3d IN_DIR OUT_DIR [--floor NX NY NZ D] [--unit-scale 1] [--no-walls]
-    phiscene import-placed MESH_DIR OUT_DIR [--up y|z] [--placements P.json] [--camera C.json] [--unit-scale 1]
-                           [--no-level] [--no-walls]
+    phiscene import-placed MESH_DIR|SCENE.glb OUT_DIR [--objects files|nodes] [--up y|z] [--placements P.json]
+                           [--camera C.json] [--unit-scale 1] [--no-level] [--no-walls]
     phiscene import-rest3d ROOT SCENE OUT_DIR [--variant sam3d|ours|dc|gen3dsr|sg] [--no-level] [--no-walls]
     phiscene import-front3d ROOT OUT_DIR [--room SCENE_ID ...] [--test-rooms 1000] [--initial PATTERN]
     phiscene export SCENE_JSON OUT_DIR [--proxies P.npz] [--topology T.json] [--suite real] [--no-check] [--demo]
@@ -371,7 +371,7 @@ def _report_import(scene, out_dir: str) -> None:
 
 
 def cmd_import_placed(args: argparse.Namespace) -> None:
-    from phiscene.io.placed import PlacedParams, import_placed, read_placed_dir
+    from phiscene.io.placed import PlacedParams, import_placed, read_placed_dir, read_scene_file
     from phiscene.io.placed_suite import read_camera
 
     try:
@@ -379,7 +379,13 @@ def cmd_import_placed(args: argparse.Namespace) -> None:
                                          "walls": {"enabled": not args.no_walls}})
     except ValueError as exc:
         raise PhisceneError(f"--unit-scale: {exc}") from None
-    objects = read_placed_dir(args.mesh_dir, args.placements)
+    if Path(args.mesh_dir).is_file():
+        if args.objects == "files":
+            raise PhisceneError(f"{args.mesh_dir}: --objects files takes a folder of mesh files; a file given alone "
+                                "is a scene file whose nodes are the objects")
+        objects = read_scene_file(args.mesh_dir, args.placements)
+    else:
+        objects = read_placed_dir(args.mesh_dir, args.placements, args.objects or "files")
     camera = read_camera(args.camera) if args.camera else None
     scene = import_placed(objects, args.out_dir, params, camera,
                           source={"kind": "placed", "path": str(args.mesh_dir)})
@@ -484,7 +490,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     pl = sub.add_parser("import-placed", help="import per-object meshes placed in one frame, levelled "
                                                "(README: Real scenes)")
-    pl.add_argument("mesh_dir", help="folder with one mesh file per object (GLB/PLY/OBJ), vertices in one frame")
+    pl.add_argument("mesh_dir", help="folder with one mesh file per object (GLB/PLY/OBJ), vertices in one frame; "
+                    "or one glTF/GLB scene file whose top-level nodes are the objects")
+    pl.add_argument("--objects", choices=("files", "nodes"),
+                    help="in a folder: one object per file (default), or each glTF/GLB file's top-level nodes")
     pl.add_argument("out_dir")
     pl.add_argument("--up", choices=("y", "z"), default="y", help="up-axis convention of the files (default y)")
     pl.add_argument("--placements", help="JSON {id: {pos, quat (w,x,y,z)} | 4x4} applied to each mesh")

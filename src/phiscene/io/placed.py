@@ -54,6 +54,11 @@ UNIT_HINT = "; pass the metres per source unit (--unit-scale 0.001 for millimetr
 PLAUSIBLE_MEDIAN_DIAGONAL = (0.01, 3.0)
 #: Mesh file suffixes read as objects.
 MESH_SUFFIXES = (".glb", ".gltf", ".ply", ".obj")
+#: Files whose nodes can be the objects (:func:`read_scene_file`): a glTF scene names and places its nodes; a PLY
+#: holds one mesh, and an OBJ's groups are read merged.
+SCENE_SUFFIXES = (".glb", ".gltf")
+#: How a folder's files are read (``objects``): one object per file, or each glTF/GLB file's top-level nodes.
+OBJECT_MODES = ("files", "nodes")
 #: A levelling that turns the scene farther than this (deg) from the given up axis gets a warning: the camera tilts of
 #: the 9 real SAM 3D Objects scenes measure 2.5 to 29 deg (``benchmarks/levelling.py``), while files whose up axis is
 #: not the one given (``--up z`` on y-up files) level onto whatever lies within reach of it (``max_tilt_deg``, and
@@ -111,19 +116,27 @@ class PlacedObject:
     Attributes
     ----------
     id
-        Object id (file stem, sanitised).
+        Object id (file stem, or node name, sanitised).
     mesh
         The mesh with its vertices in the source frame.
     description
-        Free text (from the file stem unless given).
+        Free text (from the file stem or node name unless given).
     source
         The file it came from.
+    node
+        The node of a scene file it is (:func:`read_scene_file`); ``None`` for a file per object.
     """
 
     id: str
     mesh: trimesh.Trimesh
     description: str
     source: Path
+    node: str | None = None
+
+    @property
+    def origin(self) -> str:
+        """Where the object came from: its file's name, ``file:node`` for a node of a scene file."""
+        return self.source.name if self.node is None else f"{self.source.name}:{self.node}"
 
 
 @dataclass(frozen=True)
@@ -199,29 +212,136 @@ def _where_the_meshes_are(folder: Path) -> str:
     return f"; its sub-folder {meshes[0].name}/ has them: pass {meshes[0]}" if len(meshes) == 1 else ""
 
 
-def read_placed_dir(folder: str | Path, placements: str | Path | dict | None = None) -> list[PlacedObject]:
+def read_placed_dir(folder: str | Path, placements: str | Path | dict | None = None,
+                    objects: str = "files") -> list[PlacedObject]:
     """The objects of a folder of mesh files placed in one frame.
 
     Parameters
     ----------
     folder
-        Holds one mesh file per object (:data:`MESH_SUFFIXES`), the file stem naming the object.
+        Holds one mesh file per object (:data:`MESH_SUFFIXES`), the file stem naming the object; with ``objects``
+        ``nodes``, glTF/GLB scene files whose top-level nodes are the objects (:func:`read_scene_file`).
     placements
-        Optional placement file or mapping (module docstring) applied to each object's vertices.
+        Optional placement file or mapping (module docstring) applied to each object's vertices, keyed by object
+        id (file stem or node name).
+    objects
+        ``files`` (one object per file) or ``nodes`` (:data:`OBJECT_MODES`).
 
     Raises
     ------
     InputError
-        Missing folder, no mesh files, unreadable meshes, duplicate ids, bad or unknown placements.
+        Missing folder, no mesh files, unreadable meshes, duplicate ids, bad or unknown placements; with
+        ``nodes``, a PLY or OBJ file (no nodes to read).
     """
     folder = Path(folder)
+    if objects not in OBJECT_MODES:
+        raise ValueError(f"objects must be one of {OBJECT_MODES}, got {objects!r}")
     if not folder.is_dir():
         raise InputError(folder, None, "folder not found")
     files = sorted(p for p in folder.iterdir() if p.suffix.lower() in MESH_SUFFIXES)
     if not files:
         raise InputError(folder, None, f"no mesh files ({', '.join(MESH_SUFFIXES)}) in the folder"
                          + _where_the_meshes_are(folder))
-    where = folder
+    if objects == "nodes":
+        found = [o for f in files for o in _node_objects(f)]
+    else:
+        found = [PlacedObject(object_id(f.stem), read_mesh(f), description_of(f.stem), f) for f in files]
+        if len(files) == 1 and files[0].suffix.lower() in SCENE_SUFFIXES:
+            nodes = scene_nodes(files[0])
+            if len(nodes) > 1:
+                log.warning("%s holds %d top-level nodes (%s): imported as one object; with --objects nodes "
+                            "(`objects: nodes` in a suite's source) each node is an object", files[0], len(nodes),
+                            ", ".join(list(nodes)[:4]) + (", ..." if len(nodes) > 4 else ""))
+    return _placed(found, folder, placements)
+
+
+def read_scene_file(path: str | Path, placements: str | Path | dict | None = None) -> list[PlacedObject]:
+    """The objects of one glTF/GLB scene file: each top-level node (:func:`scene_nodes`) is an object, its
+    sub-nodes' meshes in the file's frame merged, named by the node.
+
+    Parameters
+    ----------
+    path
+        The scene file (:data:`SCENE_SUFFIXES`).
+    placements
+        As :func:`read_placed_dir`'s, keyed by node name or object id.
+
+    Raises
+    ------
+    InputError
+        Missing or unreadable file, not glTF/GLB, a node without triangles, two nodes with one id, bad or unknown
+        placements.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, None, "file not found")
+    return _placed(_node_objects(path), path, placements)
+
+
+def scene_nodes(path: Path) -> dict[str, list[tuple[np.ndarray, trimesh.Trimesh]]]:
+    """The top-level nodes of a glTF/GLB file, each with its meshes (world (4, 4) transform, mesh in the node's
+    frame), sorted by node name.
+
+    The top level is the children of the scene's root, below any chain of single nodes without meshes (an
+    exporter's ``Scene`` or ``RootNode`` wrapper); a mesh on that last wrapper is an object of its own. Geometry
+    other than triangles (points, lines) is left out; a node under which none is left keeps an empty list.
+
+    Raises
+    ------
+    InputError
+        Not a glTF/GLB file, or unreadable.
+    """
+    if path.suffix.lower() not in SCENE_SUFFIXES:
+        raise InputError(path, None, f"its nodes cannot be read as objects: a scene file is glTF or GLB "
+                         f"({', '.join(SCENE_SUFFIXES)}); give a folder with one {path.suffix} file per object")
+    try:
+        scene = trimesh.load_scene(path, process=False)
+    except Exception as exc:  # trimesh raises many types for corrupt files
+        raise InputError(path, None, f"cannot read scene ({type(exc).__name__}: {str(exc)[:120]})") from None
+    graph = scene.graph
+    children = graph.transforms.children
+
+    def meshes_under(node: str, own_only: bool = False) -> list[tuple[np.ndarray, trimesh.Trimesh]]:
+        out, stack = [], [node]
+        while stack:
+            n = stack.pop()
+            T, name = graph[n]
+            geometry = scene.geometry.get(name) if name is not None else None
+            if isinstance(geometry, trimesh.Trimesh) and len(geometry.faces):
+                out.append((np.asarray(T, dtype=float), geometry))
+            if not own_only:
+                stack.extend(children.get(n, []))
+        return out
+
+    top = graph.base_frame
+    while len(children.get(top, [])) == 1 and not meshes_under(top, own_only=True):
+        top = children[top][0]
+    nodes = {n: meshes_under(n) for n in sorted(children.get(top, []))}
+    if top != graph.base_frame and meshes_under(top, own_only=True):
+        nodes[top] = meshes_under(top, own_only=True)
+    return dict(sorted(nodes.items()))
+
+
+def _node_objects(path: Path) -> list[PlacedObject]:
+    """:func:`scene_nodes` of one file as objects, each node's meshes merged in the file's frame."""
+    out = []
+    for node, parts in scene_nodes(path).items():
+        if not parts:
+            raise InputError(path, None, f"node {node!r} holds no triangles")
+        meshes = [m.copy().apply_transform(T) for T, m in parts]
+        mesh = meshes[0] if len(meshes) == 1 else trimesh.util.concatenate(meshes)
+        mesh = trimesh.Trimesh(np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces), process=False)
+        if not np.all(np.isfinite(mesh.vertices)):
+            raise InputError(path, None, f"node {node!r}: vertices contain NaN or inf")
+        out.append(PlacedObject(object_id(node), mesh, description_of(node), path, node))
+    if not out:
+        raise InputError(path, None, "no nodes with triangles in the file")
+    return out
+
+
+def _placed(objects: list[PlacedObject], where: Path, placements: str | Path | dict | None) -> list[PlacedObject]:
+    """``objects`` with their placements applied (module docstring; keyed by file stem, node name or object id),
+    checked for ids used twice and for placements of objects that are not there."""
     if isinstance(placements, (str, Path)):
         where = Path(placements)
         try:
@@ -232,20 +352,21 @@ def read_placed_dir(folder: str | Path, placements: str | Path | dict | None = N
     if not isinstance(placements, dict):
         raise InputError(where, None, f"expected a mapping of object ids (file stems) to placements, got a "
                          f"{type(placements).__name__}")
-    objects, seen = [], set()
-    for f in files:
-        oid = object_id(f.stem)
-        if oid in seen:
-            raise InputError(f, None, f"object id {oid!r} is used by another file of {folder}")
-        seen.add(oid)
-        mesh = read_mesh(f)
-        if f.stem in placements or oid in placements:
-            key = f.stem if f.stem in placements else oid
-            mesh.apply_transform(placement_matrix(placements[key], where, key))
-        objects.append(PlacedObject(oid, mesh, description_of(f.stem), f))
-    unknown = sorted(set(placements) - {o.source.stem for o in objects} - seen)
+    seen: dict[str, PlacedObject] = {}
+    names = set()
+    for o in objects:
+        if o.id in seen:
+            raise InputError(o.source, None, f"object id {o.id!r} is also the id of {seen[o.id].origin} (ids keep "
+                             "only [A-Za-z0-9_.-] of a name: rename one of them)")
+        seen[o.id] = o
+        name = o.node if o.node is not None else o.source.stem
+        names.add(name)
+        if name in placements or o.id in placements:
+            key = name if name in placements else o.id
+            o.mesh.apply_transform(placement_matrix(placements[key], where, key))
+    unknown = sorted(set(placements) - names - set(seen))
     if unknown:
-        raise InputError(where, None, f"placements for objects without a mesh file: {unknown}")
+        raise InputError(where, None, f"placements for objects without a mesh: {unknown}")
     return objects
 
 
@@ -394,8 +515,9 @@ def _write_placed(objects: list[PlacedObject], out_dir: Path, params: PlacedPara
         mesh_path = save_mesh(local, init_dir / "meshes" / f"{o.id}.glb")
         pose = np.eye(4)
         pose[:3, 3] = centre
-        scene_objects.append(SceneObject(o.id, mesh_path.resolve(), pose, o.description, None,
-                                         {"source_file": o.source.name}))
+        meta = {"source_file": o.source.name} if o.node is None else {"source_file": o.source.name,
+                                                                          "source_node": o.node}
+        scene_objects.append(SceneObject(o.id, mesh_path.resolve(), pose, o.description, None, meta))
     camera_path = None
     if camera is not None:
         eye = T[:3, :3] @ np.asarray(camera.eye, dtype=float) + T[:3, 3]
@@ -414,7 +536,7 @@ def _write_placed(objects: list[PlacedObject], out_dir: Path, params: PlacedPara
     write_json(out_dir / "import.json", {
         "format": IMPORT_FORMAT, "source": source or {}, "params": asdict(params),
         "transform": np.round(T, 12).tolist(), "levelling_rotation_deg": levelling.rotation_deg,
-        "up_estimate": up_record, "walls": walls.record, "objects": {o.id: o.source.name for o in objects}})
+        "up_estimate": up_record, "walls": walls.record, "objects": {o.id: o.origin for o in objects}})
     return load_scene(init_dir / "scene.json")  # loads back whole (meshes checked) before it is moved into place
 
 
@@ -423,7 +545,8 @@ def in_metres(objects: list[PlacedObject], camera: Camera | None,
     """The objects (copies of their meshes) and the camera with every coordinate multiplied by ``unit_scale``."""
     if unit_scale == 1.0:
         return objects, camera
-    scaled = [PlacedObject(o.id, o.mesh.copy().apply_scale(unit_scale), o.description, o.source) for o in objects]
+    scaled = [PlacedObject(o.id, o.mesh.copy().apply_scale(unit_scale), o.description, o.source, o.node)
+              for o in objects]
     if camera is not None:
         camera = Camera(np.asarray(camera.eye, dtype=float) * unit_scale,
                         np.asarray(camera.target, dtype=float) * unit_scale, camera.fov_y_deg)

@@ -3,7 +3,8 @@
 Most image-to-3D pipelines other than SAM 3D Objects write one mesh file per object with every vertex already in a
 common scene frame (:mod:`phiscene.io.placed`). A folder of such scenes is a suite::
 
-    <root>/<scene>/<object>.glb|.gltf|.ply|.obj   one mesh per object, the file stem naming it
+    <root>/<scene>/<object>.glb|.gltf|.ply|.obj   one mesh per object, the file stem naming it (with ``objects:
+                                                  nodes``: glTF/GLB files whose top-level nodes are the objects)
     <root>/<scene>/placements.json                optional: per-object placements (phiscene.io.placed's format)
     <root>/<scene>/camera.json                    optional: the photo's camera, source frame and units:
                                                   {"eye": [x, y, z], "target": [x, y, z], "fov_y_deg": 50}
@@ -21,7 +22,7 @@ from pathlib import Path
 
 from phiscene.errors import InputError
 from phiscene.io import finite_numbers
-from phiscene.io.placed import MESH_SUFFIXES, Camera, PlacedParams, import_placed, read_placed_dir
+from phiscene.io.placed import MESH_SUFFIXES, OBJECT_MODES, Camera, PlacedParams, import_placed, read_placed_dir
 from phiscene.io.source import SourceParams
 from phiscene.scene import Scene
 
@@ -44,12 +45,24 @@ class PlacedSource(SourceParams):
         ``placed``.
     params
         Import settings (:class:`~phiscene.io.placed.PlacedParams`: up convention, units, levelling, walls).
+    objects
+        How a scene folder's files are read (:data:`~phiscene.io.placed.OBJECT_MODES`): ``files``, one object per
+        mesh file; ``nodes``, each glTF/GLB file's top-level nodes (:func:`~phiscene.io.placed.read_scene_file`:
+        a scene exported as one file).
     """
 
     _label = "placed-mesh source"
 
     kind: str = "placed"
     params: PlacedParams = field(default_factory=PlacedParams)
+    objects: str = "files"
+
+    def check(self) -> None:
+        """Reject another kind (:class:`~phiscene.io.source.SourceParams`) or an unknown ``objects``
+        (``ValueError``)."""
+        super().check()
+        if self.objects not in OBJECT_MODES:
+            raise ValueError(f"{self._label} objects must be one of {list(OBJECT_MODES)}, got {self.objects!r}")
 
 
 def scene_ids(root: str | Path) -> list[str]:
@@ -98,7 +111,7 @@ def run_placed_scene(source: dict, scene: str, out_dir: str | Path) -> Scene:
     src = PlacedSource.from_dict(source)
     folder = Path(src.root) / scene
     placements = folder / PLACEMENTS_FILE
-    objects = read_placed_dir(folder, placements if placements.is_file() else None)
+    objects = read_placed_dir(folder, placements if placements.is_file() else None, src.objects)
     camera = read_camera(folder / CAMERA_FILE) if (folder / CAMERA_FILE).is_file() else None
     return import_placed(objects, out_dir, src.params, camera,
                          source={"kind": "placed", "root": src.root, "scene": scene})
