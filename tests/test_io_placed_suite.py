@@ -142,6 +142,8 @@ def test_import_placed_command_takes_the_camera(tmp_path):
 
 
 def test_a_folder_without_meshes_says_where_they_are(tmp_path):
+    """A folder without mesh files names the sub-folder or SAM 3D run that has them; a point cloud (a Gaussian
+    splat) is named as one."""
     import trimesh
 
     from phiscene.io.placed import read_placed_dir
@@ -157,6 +159,10 @@ def test_a_folder_without_meshes_says_where_they_are(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(InputError, match=r"in the folder$"):
         read_placed_dir(tmp_path / "empty")
+    (tmp_path / "splat").mkdir()
+    trimesh.PointCloud(np.random.default_rng(0).normal(size=(300, 3))).export(tmp_path / "splat/bear.ply")
+    with pytest.raises(InputError, match=r"bear.ply: no triangles in the file: a point cloud of 300 points"):
+        read_placed_dir(tmp_path / "splat")
 
 
 def _scene_file(path: Path) -> dict:

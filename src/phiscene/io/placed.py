@@ -177,10 +177,22 @@ def read_mesh(path: Path) -> trimesh.Trimesh:
     except Exception as exc:  # trimesh raises many types for corrupt files
         raise InputError(path, None, f"cannot read mesh ({type(exc).__name__}: {str(exc)[:120]})") from None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise InputError(path, None, "no triangles in the file")
+        points = _point_count(path)
+        raise InputError(path, None, "no triangles in the file" + (
+            f": a point cloud of {points} points (a Gaussian splat?); give the object's mesh (SAM 3D Objects "
+            "writes it as a GLB)" if points else ""))
     if not np.all(np.isfinite(mesh.vertices)):
         raise InputError(path, None, "vertices contain NaN or inf")
     return mesh
+
+
+def _point_count(path: Path) -> int:
+    """The points of a file read as a point cloud (0 when it is none): what a mesh file without triangles holds."""
+    try:
+        cloud = trimesh.load(path, process=False)
+    except Exception:  # read once already; only the message depends on this
+        return 0
+    return len(cloud.vertices) if isinstance(cloud, trimesh.PointCloud) else 0
 
 
 def placement_matrix(entry, where: Path, key: str) -> np.ndarray:
