@@ -245,3 +245,25 @@ def test_a_scene_file_imports_one_object_per_top_level_node(tmp_path, caplog):
     shutil.copy(folder / "room.glb", folder / "room2.glb")
     with pytest.raises(InputError, match=r"room2.glb: object id 'book' is also the id of room.glb:book"):
         read_placed_dir(folder, objects="nodes")
+
+
+def test_an_opencv_frame_imports_as_its_y_up_twin(tmp_path):
+    """`up: -y` (OpenCV's camera frame: y down, z forward) is the y-up scene turned half a turn about x: imported
+    without levelling, each object lands where the y-up files put it (the two conventions differ by exactly that
+    turn); with levelling, both estimate the same up."""
+    from phiscene.io.placed import PlacedObject, PlacedParams, import_placed, read_scene_file
+
+    _scene_file(tmp_path / "room.glb")
+    y_up = read_scene_file(tmp_path / "room.glb")
+    flip = np.diag([1.0, -1.0, -1.0, 1.0])
+    y_down = [PlacedObject(o.id, o.mesh.copy().apply_transform(flip), o.description, o.source) for o in y_up]
+    for level in (False, True):
+        a = import_placed(y_up, tmp_path / f"a{level}", PlacedParams(up="y", level=level))
+        b = import_placed(y_down, tmp_path / f"b{level}", PlacedParams(up="-y", level=level))
+        for oa in a.objects:
+            ob = b.get(oa.id)
+            wa = oa.mesh().copy().apply_transform(oa.pose)
+            wb = ob.mesh().copy().apply_transform(ob.pose)
+            assert np.allclose(wa.vertices, wb.vertices, atol=1e-6), (level, oa.id)
+    with pytest.raises(ValueError, match=r"'up' must be one of"):
+        PlacedParams.from_dict({"up": "down"})

@@ -5,7 +5,7 @@
     phiscene bench OUT_DIR [--suite contact] [--index 0] [--config ...]
     phiscene failures [RESULTS_DIR] [--why]
     phiscene import-sam3d IN_DIR OUT_DIR [--floor NX NY NZ D] [--unit-scale 1] [--no-walls]
-    phiscene import-placed MESH_DIR|SCENE.glb OUT_DIR [--objects files|nodes] [--up y|z] [--placements P.json]
+    phiscene import-placed MESH_DIR|SCENE.glb OUT_DIR [--objects files|nodes] [--up y|z|-y|...] [--placements P.json]
                            [--camera C.json] [--unit-scale 1] [--no-level] [--no-walls]
     phiscene import-rest3d ROOT SCENE OUT_DIR [--variant sam3d|ours|dc|gen3dsr|sg] [--no-level] [--no-walls]
     phiscene import-front3d ROOT OUT_DIR [--room SCENE_ID ...] [--test-rooms 1000] [--initial PATTERN]
@@ -430,6 +430,8 @@ def _positive_int(text: str) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from phiscene.io import OBJECT_MODES, UP_AXES
+
     ap = argparse.ArgumentParser(prog="phiscene", description=__doc__.split("\n\n")[0])
     ap.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     ap.add_argument("--threads", type=_positive_int, default=1,
@@ -492,10 +494,11 @@ def build_parser() -> argparse.ArgumentParser:
                                                "(README: Real scenes)")
     pl.add_argument("mesh_dir", help="folder with one mesh file per object (GLB/PLY/OBJ), vertices in one frame; "
                     "or one glTF/GLB scene file whose top-level nodes are the objects")
-    pl.add_argument("--objects", choices=("files", "nodes"),
+    pl.add_argument("--objects", choices=OBJECT_MODES,
                     help="in a folder: one object per file (default), or each glTF/GLB file's top-level nodes")
     pl.add_argument("out_dir")
-    pl.add_argument("--up", choices=("y", "z"), default="y", help="up-axis convention of the files (default y)")
+    pl.add_argument("--up", choices=UP_AXES, default="y",
+                    help="the files' axis that points up (default y, glTF's; --up=-y: OpenCV's camera frame, y down)")
     pl.add_argument("--placements", help="JSON {id: {pos, quat (w,x,y,z)} | 4x4} applied to each mesh")
     pl.add_argument("--camera", help="JSON {eye, target, fov_y_deg}: the photo's camera in the files' frame and units "
                                      "(written as reference/camera.json)")

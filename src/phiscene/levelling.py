@@ -69,10 +69,6 @@ STEEP_PRIOR_DEG = 30.0
 #: plane 35 degrees from its votes with no residual at all).
 FLOOR_MIN_OBJECTS = 4
 
-#: Up axis conventions of source files -> the rotation that makes them z-up.
-UP_AXES = ("y", "z")
-
-
 @dataclass(frozen=True)
 class LevelParams(Params):
     """Settings of the up-direction estimate (:func:`estimate_up`).

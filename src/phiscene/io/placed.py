@@ -34,8 +34,8 @@ import trimesh
 
 from phiscene.atomic import write_json
 from phiscene.errors import InputError
-from phiscene.io import check_unit_scale
-from phiscene.levelling import LevelParams, UpEstimate, angle_deg, estimate_up, levelling_transform
+from phiscene.io import OBJECT_MODES, UP_AXES, check_unit_scale
+from phiscene.levelling import LevelParams, UpEstimate, angle_deg, estimate_up, levelling_transform, rotation_between
 from phiscene.params import Params
 from phiscene.scene import Scene, SceneObject, check_world_bounds, load_scene, save_scene
 from phiscene.transforms import Y_UP_TO_Z_UP, make_pose, quat_wxyz_to_matrix, rigidity_error
@@ -57,8 +57,6 @@ MESH_SUFFIXES = (".glb", ".gltf", ".ply", ".obj")
 #: Files whose nodes can be the objects (:func:`read_scene_file`): a glTF scene names and places its nodes; a PLY
 #: holds one mesh, and an OBJ's groups are read merged.
 SCENE_SUFFIXES = (".glb", ".gltf")
-#: How a folder's files are read (``objects``): one object per file, or each glTF/GLB file's top-level nodes.
-OBJECT_MODES = ("files", "nodes")
 #: A levelling that turns the scene farther than this (deg) from the given up axis gets a warning: the camera tilts of
 #: the 9 real SAM 3D Objects scenes measure 2.5 to 29 deg (``benchmarks/levelling.py``), while files whose up axis is
 #: not the one given (``--up z`` on y-up files) level onto whatever lies within reach of it (``max_tilt_deg``, and
@@ -73,7 +71,8 @@ class PlacedParams(Params):
     Attributes
     ----------
     up
-        Up-axis convention of the source files: ``y`` (glTF, SAM 3D Objects' GLBs) or ``z``.
+        Up-axis convention of the source files (:data:`UP_AXES`): ``y`` (glTF, SAM 3D Objects' GLBs), ``z``, or
+        another axis, signed (``-y``: OpenCV's camera frame).
     unit_scale
         Metres per source unit: multiplies every vertex, placement translation and camera position (1 for metric
         output such as SAM 3D Objects'; 0.001 for millimetres, 0.01 for centimetres). A scene whose levelled
@@ -102,8 +101,8 @@ class PlacedParams(Params):
 
     def check(self) -> None:
         """Reject an unknown up axis or image size (``ValueError``)."""
-        if self.up not in ("y", "z"):
-            raise ValueError(f"import parameter 'up' must be 'y' or 'z', got {self.up!r}")
+        if self.up not in UP_AXES:
+            raise ValueError(f"import parameter 'up' must be one of {list(UP_AXES)}, got {self.up!r}")
         check_unit_scale(self.unit_scale)
         if self.image_width < 1 or self.image_height < 1:
             raise ValueError("import parameters 'image_width' and 'image_height' must be >= 1")
@@ -383,8 +382,16 @@ def _placed(objects: list[PlacedObject], where: Path, placements: str | Path | d
 
 
 def source_to_z_up(up: str) -> np.ndarray:
-    """Rotation (3, 3) from a source convention (``y`` or ``z`` up) to phiscene's z-up axes."""
-    return np.asarray(Y_UP_TO_Z_UP, dtype=float)[:3, :3] if up == "y" else np.eye(3)
+    """Rotation (3, 3) from a source convention (:data:`UP_AXES`: the axis that points up) to phiscene's z-up axes:
+    glTF's ``y`` as :data:`~phiscene.transforms.Y_UP_TO_Z_UP`, ``z`` unchanged, any other the least rotation taking
+    that axis to +z (``-y``: OpenCV's camera frame, y down, z forward, becomes x, z forward -> +y)."""
+    if up == "y":
+        return np.asarray(Y_UP_TO_Z_UP, dtype=float)[:3, :3]
+    if up == "z":
+        return np.eye(3)
+    axis = np.zeros(3)
+    axis["xyz".index(up[-1])] = -1.0 if up.startswith("-") else 1.0
+    return rotation_between(axis, [0.0, 0.0, 1.0])
 
 
 @dataclass

@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from phiscene.errors import InputError
-from phiscene.io import finite_numbers
-from phiscene.io.placed import MESH_SUFFIXES, OBJECT_MODES, Camera, PlacedParams, import_placed, read_placed_dir
+from phiscene.io import OBJECT_MODES, finite_numbers
+from phiscene.io.placed import MESH_SUFFIXES, Camera, PlacedParams, import_placed, read_placed_dir
 from phiscene.io.source import SourceParams
 from phiscene.scene import Scene
 
@@ -46,7 +46,7 @@ class PlacedSource(SourceParams):
     params
         Import settings (:class:`~phiscene.io.placed.PlacedParams`: up convention, units, levelling, walls).
     objects
-        How a scene folder's files are read (:data:`~phiscene.io.placed.OBJECT_MODES`): ``files``, one object per
+        How a scene folder's files are read (:data:`~phiscene.io.OBJECT_MODES`): ``files``, one object per
         mesh file; ``nodes``, each glTF/GLB file's top-level nodes (:func:`~phiscene.io.placed.read_scene_file`:
         a scene exported as one file).
     """
