@@ -15,7 +15,7 @@ from phiscene.proxies import ProxyParams, scene_proxies
 from phiscene.scene import Plane, Scene, SceneObject
 from phiscene.sim.settings import SimSettings
 from phiscene.topology.attached import AttachedParams, attached_ids, attached_objects, is_fragment, panel_normal
-from phiscene.topology.words import head_words, names_fixture, says_mounted
+from phiscene.topology.words import head_words, names_fixture, names_structure, says_mounted
 from phiscene.transforms import make_pose, rotation_z
 
 SIM = SimSettings()
@@ -102,6 +102,42 @@ def test_posters_overlapping_on_a_wall_do_not_hold_each_other_up(tmp_path):
     ])
     decided = attached_objects(scene)
     assert decided == {"low": "description", "high": "description", "shelf": "description"}
+
+
+def test_the_room_s_own_meshes_are_read_from_the_head_noun():
+    assert names_structure("white wall") and names_structure("wooden floor on the left") and names_structure("ceiling")
+    assert names_structure("back wall of the room") and names_structure("walls")
+    for other in ("wall clock", "floor lamp", "ceiling fan", "round woven basket hanging from ceiling", "wall shelf",
+                  "grey carpet on the floor", "plank leaning against the wall"):
+        assert not names_structure(other), other
+
+
+def test_a_wall_mesh_and_a_floor_mesh_stay_put_and_keep_what_they_carry(tmp_path):
+    """A reconstruction that meshes its floor and a wall as objects: both are attached where they are (a free wall
+    mesh falls across the room); the poster touching the wall mesh is still attached (the wall holds it only from
+    below, and nothing lies under the poster); the box standing on the floor mesh stays free and rests on it."""
+    boxes = {"floor": (3.0, 3.0, 0.05), "wall": (3.0, 0.05, 2.5), "poster": (0.6, 0.01, 0.8), "box": (0.3, 0.3, 0.3)}
+    mesh = {n: save_mesh(trimesh.creation.box(s), tmp_path / f"{n}.obj") for n, s in boxes.items()}
+    scene = Scene([
+        SceneObject("floor", mesh["floor"], make_pose(translation=[0, 0, 0.025]), "wooden floor"),
+        SceneObject("wall", mesh["wall"], make_pose(translation=[0, 1.525, 1.3]), "white wall"),
+        SceneObject("poster", mesh["poster"], make_pose(translation=[0.5, 1.495, 1.5]), "paper poster"),
+        SceneObject("box", mesh["box"], make_pose(translation=[-0.5, 0.0, 0.2 + 0.03]), "cardboard box"),
+    ])
+    assert attached_objects(scene) == {"floor": "structure", "wall": "structure", "poster": "description"}
+    cache = tmp_path / "cache"
+    proxies = scene_proxies(scene, ProxyParams(backend="convex"), cache)
+    g = topology.infer(scene, "geometric", {})
+    assert attached_ids(g) == ["floor", "wall", "poster"] and g.parents("box") == ["floor"]
+    fixed = attached_ids(g, holders=True)
+    out, record = ground_scene(scene, g.order, proxies, AssemblyParams(), SIM, cache, attached=fixed)
+    for oid in ("wall", "poster"):
+        np.testing.assert_array_equal(out.get(oid).pose, scene.get(oid).pose)
+    # the box comes down the 3 cm onto the floor mesh's top (z = 0.05): its bottom within a millimetre below (the
+    # simulator's contact) and the clearance above it
+    bottom, top = out.get("box").world_mesh().bounds[0, 2], out.get("floor").world_mesh().bounds[1, 2]
+    assert top == pytest.approx(0.05) and top - 0.001 <= bottom <= top + 0.006
+    assert record["objects"]["box"]["settled"]
 
 
 def test_decision_from_geometry_and_description(room):

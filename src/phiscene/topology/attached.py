@@ -5,9 +5,15 @@ an object it decides is attached loses its support edges and gets one ``ground -
 ``attached`` (the ground node stands for the fixed world: walls and ceiling included). The grounding keeps such
 objects static where they are; metrics treat them as colliders and leave them out of drift averages.
 
-The decision (:func:`attached_objects`) combines two signals, each of which can only *add* an attachment when
-nothing holds the object from below (no other object's surface, and not the ground, within ``support_gap`` under
-its footprint):
+The room's own meshes are attached wherever they are (reason ``structure``): a reconstruction that meshes its
+floor, a wall or the ceiling as objects ("white wall", "wooden floor": the description's head noun,
+:func:`~phiscene.topology.words.names_structure`). Dropped as free objects, a wall mesh falls over across the room
+and takes the posters on it. Such a mesh holds what its surface carries from below (a chair on the floor mesh), not
+what touches it from the side (a poster on the wall mesh is still attached).
+
+For every other object the decision (:func:`attached_objects`) combines two signals, each of which can only *add*
+an attachment when nothing holds the object from below (no other object's surface, and not the ground, within
+``support_gap`` under its footprint):
 
 * description: a wall or ceiling object (:data:`WALL_WORDS`, e.g. "poster", "painting", "curtain",
   "whiteboard", "ceiling fan") or an explicit "on the wall" / "hanging" phrase (:data:`MOUNT_PHRASES`);
@@ -43,12 +49,22 @@ import numpy as np
 
 from phiscene.params import Params
 from phiscene.topology.graph import GROUND, SupportEdge, SupportGraph
-from phiscene.topology.words import names_fixture, names_furniture, names_wall_object, says_mounted, says_partial
+from phiscene.topology.words import (
+    names_fixture,
+    names_furniture,
+    names_structure,
+    names_wall_object,
+    says_mounted,
+    says_partial,
+)
 
 #: Relation name of an attachment edge.
 ATTACHED = "attached"
 #: Reason of an attachment that keeps a fragment of floor furniture in place (:func:`is_fragment`).
 PARTIAL = "partial"
+#: Reason of an attachment that keeps a mesh of the room itself in place (its floor, a wall, the ceiling:
+#: :func:`~phiscene.topology.words.names_structure`).
+STRUCTURE = "structure"
 #: A panel's thin axis is at most this far (deg) from horizontal (:func:`panel_normal`).
 PANEL_TILT_DEG = 30.0
 
@@ -129,10 +145,12 @@ def panel_normal(mesh, thin_ratio: float) -> np.ndarray | None:
 
 
 def _held_from_below(scene, oid: str, world: dict, ground: float, params: AttachedParams,
-                     holds_nothing: frozenset = frozenset()) -> bool:
+                     holds_nothing: frozenset = frozenset(), from_below_only: frozenset = frozenset()) -> bool:
     """Whether a surface (another object or the ground) lies within ``support_gap`` under ``oid``'s lowest points.
 
-    Objects in ``holds_nothing`` (wall objects that are not building fixtures) are not looked at.
+    Objects in ``holds_nothing`` (wall objects that are not building fixtures) are not looked at; those in
+    ``from_below_only`` (the room's own meshes) hold only what their surface carries from below, not what touches
+    them from the side (a poster on a wall mesh).
     """
     import trimesh
 
@@ -157,7 +175,7 @@ def _held_from_below(scene, oid: str, world: dict, ground: float, params: Attach
         if len(hits) and (lo - hits[:, 2].max()) <= params.support_gap:
             return True
         # touching or interpenetrating from the side/below also holds it (e.g. a shelf board)
-        if oz1 >= lo and m.bounds[0, 2] < lo:
+        if oz1 >= lo and m.bounds[0, 2] < lo and other not in from_below_only:
             inside = trimesh.proximity.signed_distance(m, v[near][: min(16, int(near.sum()))]) > -params.support_gap
             if inside.any():
                 return True
@@ -182,8 +200,8 @@ def is_fragment(description: str, bottom: float, top: float, ground: float, para
 
 
 def attached_objects(scene, params: AttachedParams = AttachedParams(), world: dict | None = None) -> dict[str, str]:
-    """Objects decided attached (module docstring) -> why (``fixture``, ``description``, ``partial``, ``panel`` or
-    ``ceiling``).
+    """Objects decided attached (module docstring) -> why (``structure``, ``fixture``, ``description``, ``partial``,
+    ``panel`` or ``ceiling``).
 
     Objects already marked :attr:`~phiscene.scene.SceneObject.attached` in the scene are kept (reason ``given``).
     ``world``: the objects' world meshes by id when the caller has them (else they are built here).
@@ -199,8 +217,12 @@ def attached_objects(scene, params: AttachedParams = AttachedParams(), world: di
     # a window's sill or the top of a radiator does hold a plant)
     holds_nothing = frozenset(o.id for o in scene.objects
                               if names_wall_object(object_text(o)) and not names_fixture(object_text(o)))
+    structure = frozenset(o.id for o in scene.objects if names_structure(object_text(o)))
     for o in scene.objects:
         if o.id in out:
+            continue
+        if o.id in structure:
+            out[o.id] = STRUCTURE
             continue
         if names_fixture(object_text(o)):
             out[o.id] = "fixture"
@@ -214,7 +236,7 @@ def attached_objects(scene, params: AttachedParams = AttachedParams(), world: di
             ceiling = room and top - hi[2] <= params.ceiling_gap
             why = "description" if says_mounted(object_text(o)) else PARTIAL if fragment else \
                 "panel" if panel_normal(m, params.thin_ratio) is not None else "ceiling" if ceiling else None
-        if why is None or _held_from_below(scene, o.id, world, ground, params, holds_nothing):
+        if why is None or _held_from_below(scene, o.id, world, ground, params, holds_nothing, structure):
             continue
         out[o.id] = why
     return out

@@ -34,6 +34,12 @@ FURNITURE_WORDS = ("chair", "chairs", "armchair", "table", "tables", "desk", "so
                    "dresser", "wardrobe", "bookshelf", "bookcase", "nightstand", "stool", "bench", "ottoman",
                    "sideboard", "cupboard", "drawers", "refrigerator", "fridge", "piano", "armoire", "credenza",
                    "shelf", "shelves", "shelving", "rack", "stand", "chest")
+#: Head nouns of the room's own surfaces: a reconstruction that meshes its floor, walls or ceiling as objects
+#: ("white wall", "wooden floor"; not "wall clock" or "floor lamp", whose head nouns are others).
+STRUCTURE_WORDS = ("wall", "walls", "floor", "floors", "flooring", "ceiling", "ceilings", "ground", "layout")
+#: Words that also end the head of a description read for :data:`STRUCTURE_WORDS` ("basket hanging from ceiling",
+#: "back wall of the room").
+STRUCTURE_HEAD_END = ("from", "of", "to", "for")
 #: Words after the head noun that do not name another object ("wooden cabinet partially visible", "chair 87 cm").
 TRAILING = ("partially", "partly", "visible", "occluded", "cut", "off", "cropped", "cm", "mm", "m", "x")
 
@@ -88,6 +94,21 @@ def names_furniture(description: str) -> bool:
     """Whether a description's head noun (:func:`head_noun`) is floor furniture (:data:`FURNITURE_WORDS`) and it does
     not say the object is mounted (:func:`says_mounted`: a wall-mounted shelf)."""
     return head_noun(description) in FURNITURE_WORDS and not says_mounted(description)
+
+
+def names_structure(description: str) -> bool:
+    """Whether a description's head noun is one of the room's surfaces (:data:`STRUCTURE_WORDS`): "white wall",
+    "wooden floor on the left", "back wall of the room" yes; "wall clock", "floor lamp", "ceiling fan", "basket
+    hanging from ceiling" no. The head ends at a :data:`HEAD_END` preposition or one of :data:`STRUCTURE_HEAD_END`,
+    so what the object hangs from or belongs to is not read as the object."""
+    words = []
+    for w in head_words(description):
+        if w in STRUCTURE_HEAD_END:
+            break
+        words.append(w)
+    while words and words[-1] in TRAILING:
+        words.pop()
+    return bool(words) and words[-1] in STRUCTURE_WORDS
 
 
 def says_against_wall(description: str) -> bool:
