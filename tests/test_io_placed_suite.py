@@ -267,3 +267,24 @@ def test_an_opencv_frame_imports_as_its_y_up_twin(tmp_path):
             assert np.allclose(wa.vertices, wb.vertices, atol=1e-6), (level, oa.id)
     with pytest.raises(ValueError, match=r"'up' must be one of"):
         PlacedParams.from_dict({"up": "down"})
+
+
+def test_the_room_s_own_meshes_do_not_set_the_scene_s_scale(tmp_path, caplog):
+    """The median object of a scene whose floor, wall and ceiling are meshed (4 m each) is a chair or a box: no warning
+    about units; the same meshes named as objects give the warning (a median of 4.7 m)."""
+    import trimesh
+
+    from phiscene.io.placed import PlacedObject, check_placed
+
+    sizes = {"wooden floor": (4.0, 4.0, 0.05), "white wall": (4.0, 0.1, 2.5), "ceiling": (4.0, 4.0, 0.05),
+             "chair": (0.5, 0.5, 0.9),
+             "box": (0.3, 0.3, 0.3)}
+    objects = [PlacedObject(d.replace(" ", "_"), trimesh.creation.box(s), d, tmp_path / f"{d}.glb")
+               for d, s in sizes.items()]
+    with caplog.at_level("WARNING"):
+        check_placed(objects, None, tmp_path / "out")
+    assert "are the meshes in metres" not in caplog.text
+    renamed = [PlacedObject(o.id, o.mesh, f"object {k}", o.source) for k, o in enumerate(objects)]
+    with caplog.at_level("WARNING"):
+        check_placed(renamed, None, tmp_path / "out")
+    assert "median object is 4.72 m across" in caplog.text

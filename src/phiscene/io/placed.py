@@ -481,7 +481,7 @@ def import_placed(objects: list[PlacedObject], out_dir: str | Path, params: Plac
 def check_placed(objects: list[PlacedObject], camera: Camera | None, out_dir: Path) -> None:
     """The checks of :func:`import_placed` that need no levelling, on objects and camera in metres (``InputError``
     naming the file and the problem); a warning for a scene whose median object is implausibly large or small in
-    metres (:data:`PLAUSIBLE_MEDIAN_DIAGONAL`)."""
+    metres (:data:`PLAUSIBLE_MEDIAN_DIAGONAL`; the room's own meshes, a floor or a wall, left out of the median)."""
     from phiscene.meshes import check_mesh
 
     if not objects:
@@ -493,7 +493,11 @@ def check_placed(objects: list[PlacedObject], camera: Camera | None, out_dir: Pa
                              "[A-Za-z0-9_.-] of a name: rename one of them)")
         seen[o.id] = o.source
         check_mesh(o.mesh, o.source)
-    median = float(np.median([np.linalg.norm(o.mesh.extents) for o in objects]))
+    from phiscene.topology.words import names_structure
+
+    # the room's own meshes (a floor, a wall) are metres across in any scene
+    sized = [o for o in objects if not names_structure(o.description)] or objects
+    median = float(np.median([np.linalg.norm(o.mesh.extents) for o in sized]))
     low, high = PLAUSIBLE_MEDIAN_DIAGONAL
     if not low <= median <= high:
         log.warning("%s: its median object is %.3g m across (%d objects, from %s): are the meshes in metres%s",
