@@ -288,3 +288,32 @@ def test_the_room_s_own_meshes_do_not_set_the_scene_s_scale(tmp_path, caplog):
     with caplog.at_level("WARNING"):
         check_placed(renamed, None, tmp_path / "out")
     assert "median object is 4.72 m across" in caplog.text
+
+
+def test_a_flat_floor_or_wall_mesh_becomes_a_slab_behind_its_face(tmp_path):
+    """Layouts mesh their floor and walls as single quads. A flat mesh named as the room's own surface is made a slab
+    `STRUCTURE_THICKNESS` thick behind its face, away from the other objects (the floor's top stays where the quad
+    was, the wall's face too); a flat mesh of anything else is still refused, naming it."""
+    import trimesh
+
+    from phiscene.io.placed import STRUCTURE_THICKNESS, PlacedObject, PlacedParams, import_placed
+
+    quad = trimesh.Trimesh([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]], [[0, 1, 2], [0, 2, 3]], process=False)
+    wall = trimesh.Trimesh([[-2, 1.6, 0], [2, 1.6, 0], [2, 1.6, 2.5], [-2, 1.6, 2.5]], [[0, 1, 2], [0, 2, 3]],
+                           process=False)
+    box = trimesh.creation.box((0.3, 0.3, 0.3)).apply_translation((0.0, 0.5, 0.15))
+    objects = [PlacedObject("floor", quad, "wooden floor", tmp_path / "floor.glb"),
+               PlacedObject("wall", wall, "white wall", tmp_path / "wall.glb"),
+               PlacedObject("box", box, "cardboard box", tmp_path / "box.glb")]
+    scene = import_placed(objects, tmp_path / "out", PlacedParams(up="z", level=False))
+    world = {o.id: o.mesh().copy().apply_transform(o.pose).bounds for o in scene.objects}
+    lift = world["box"][0, 2]  # the box stood on the quad: the floor's top is its bottom
+    close = {"abs": 1e-6}  # the meshes are written as GLB: float32
+    assert world["floor"][1, 2] == pytest.approx(lift, **close)
+    assert world["floor"][0, 2] == pytest.approx(lift - STRUCTURE_THICKNESS, **close)
+    assert world["wall"][0, 1] == pytest.approx(1.6, **close)
+    assert world["wall"][1, 1] == pytest.approx(1.6 + STRUCTURE_THICKNESS, **close)
+    poster = trimesh.Trimesh([[0, 1.59, 1], [0.5, 1.59, 1], [0.5, 1.59, 1.5]], [[0, 1, 2]], process=False)
+    with pytest.raises(InputError, match=r"poster.glb: mesh has no volume"):
+        import_placed([*objects, PlacedObject("poster", poster, "paper poster", tmp_path / "poster.glb")],
+                      tmp_path / "out2", PlacedParams(up="z", level=False))

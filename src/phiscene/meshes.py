@@ -63,14 +63,19 @@ def check_mesh(mesh: trimesh.Trimesh, path: str | Path | None = None) -> None:
         raise InputError(path, None, "mesh has NaN or inf vertex coordinates")
     if len(mesh.faces) and (mesh.faces.max() >= len(v) or mesh.faces.min() < 0):
         raise InputError(path, None, "mesh faces index missing vertices")
+    volume = hull_volume(mesh)
+    if volume < TOL.min_volume:
+        raise InputError(path, None,
+                         f"mesh has no volume (convex hull volume {volume:.3g} m^3): flat or degenerate")
+
+
+def hull_volume(mesh: trimesh.Trimesh) -> float:
+    """Volume (m^3) of a mesh's convex hull; 0 for flat or collinear vertices (which qhull refuses)."""
     try:
         with np.errstate(divide="ignore", invalid="ignore"):  # trimesh divides by a zero volume for flat input
-            hull_volume = float(mesh.convex_hull.volume)
+            return float(mesh.convex_hull.volume)
     except Exception:  # qhull fails on flat or collinear input
-        hull_volume = 0.0
-    if hull_volume < TOL.min_volume:
-        raise InputError(path, None,
-                         f"mesh has no volume (convex hull volume {hull_volume:.3g} m^3): flat or degenerate")
+        return 0.0
 
 
 def repair(mesh: trimesh.Trimesh) -> trimesh.Trimesh:

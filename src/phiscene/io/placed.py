@@ -52,6 +52,9 @@ UNIT_HINT = "; pass the metres per source unit (--unit-scale 0.001 for millimetr
 #: checks with 4 m chairs (a REST3D ``dc`` result), which then settle as slowly as towers and clear a table top only
 #: by metres. Smaller than the lower bound (1 cm): a scene in kilometres or normalised to a unit box.
 PLAUSIBLE_MEDIAN_DIAGONAL = (0.01, 3.0)
+#: Thickness (m) given to a flat mesh of the room itself (a floor or wall quad: :func:`solid_structure`), behind its
+#: face; what stands on it or hangs on it touches the face, so only the simulators' margin sees the thickness.
+STRUCTURE_THICKNESS = 0.05
 #: Mesh file suffixes read as objects.
 MESH_SUFFIXES = (".glb", ".gltf", ".ply", ".obj")
 #: Files whose nodes can be the objects (:func:`read_scene_file`): a glTF scene names and places its nodes; a PLY
@@ -468,6 +471,7 @@ def import_placed(objects: list[PlacedObject], out_dir: str | Path, params: Plac
 
     out_dir = Path(out_dir)
     objects, camera = in_metres(objects, camera, params.unit_scale)
+    objects = solid_structure(objects)
     check_placed(objects, camera, out_dir)
     with staged_folder(out_dir) as stage:
         _write_placed(objects, stage, params, camera, source, transform)
@@ -476,6 +480,38 @@ def import_placed(objects: list[PlacedObject], out_dir: str | Path, params: Plac
     log.info("%s: %d objects, levelled by %.2f deg, %d walls estimated", out_dir, len(scene),
              scene.meta["levelling"]["rotation_deg"], len(scene.structure))
     return scene
+
+
+def solid_structure(objects: list[PlacedObject], thickness: float = STRUCTURE_THICKNESS) -> list[PlacedObject]:
+    """The objects, each flat mesh of the room itself (a floor or wall quad: a description naming one,
+    :func:`~phiscene.topology.words.names_structure`, and every vertex on one plane) made a slab ``thickness`` (m)
+    thick behind its face: the convex hull of its vertices and of their copies moved along the plane's normal, away
+    from the other objects' centre (down for a floor alone). Every other object is returned as it is (a flat mesh
+    of anything else is refused by :func:`check_placed`)."""
+    from phiscene.meshes import hull_volume
+    from phiscene.tolerances import TOL
+    from phiscene.topology.words import names_structure
+
+    out = []
+    for k, o in enumerate(objects):
+        v = np.asarray(o.mesh.vertices, dtype=float)
+        if not names_structure(o.description) or len(v) < 3:
+            out.append(o)
+            continue
+        centre = v.mean(axis=0)
+        _, sv, vt = np.linalg.svd(v - centre, full_matrices=False)
+        if hull_volume(o.mesh) >= TOL.min_volume or sv[1] <= 1e-9:  # a solid (kept), or a line (refused later)
+            out.append(o)
+            continue
+        normal = vt[-1]
+        others = [np.asarray(q.mesh.vertices, dtype=float).mean(axis=0) for j, q in enumerate(objects) if j != k]
+        towards = np.mean(others, axis=0) - centre if others else np.array([0.0, 0.0, 1.0])
+        if normal @ towards > 0:
+            normal = -normal
+        slab = trimesh.convex.convex_hull(np.vstack([v, v + thickness * normal]))
+        log.info("%s is flat (%s): made a slab %.3g m thick behind its face", o.origin, o.description, thickness)
+        out.append(PlacedObject(o.id, slab, o.description, o.source, o.node))
+    return out
 
 
 def check_placed(objects: list[PlacedObject], camera: Camera | None, out_dir: Path) -> None:
