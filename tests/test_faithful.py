@@ -149,6 +149,35 @@ def test_leaning_plank_keeps_both_supporters(work):
     assert cert["displacement"] < 0.03
 
 
+def test_two_books_leaning_on_each_other_stand(work):
+    """Two 25 cm books stand 20 deg off vertical, their tops against each other (an A-frame). Statics: each leans on
+    the other's push, held by the floor's friction (mu >= tan(20 deg) / 2 = 0.18; the world has 0.8), so both stand
+    where they are. The support graph cannot hold the cycle: one `leans_on` edge is dropped and the first book is
+    placed alone. With what it leans on standing in at its input pose it rests there, leaning (not turned flush onto
+    its base); without (the dropped edge forgotten) it is stood upright, 20 deg from the photo."""
+    a = math.radians(20)
+    corners = np.array([[x, y, z] for x in (-0.015, 0.015) for y in (-0.075, 0.075) for z in (-0.125, 0.125)])
+    placements = {}
+    for name, sign in (("left", 1.0), ("right", -1.0)):
+        R = Rotation.from_euler("y", sign * a).as_matrix()
+        c = corners @ R.T
+        x = -c[:, 0].max() if sign > 0 else -c[:, 0].min()  # the top edge on the plane x = 0
+        placements[name] = ("book", make_pose(R, (x, 0.0, -c[:, 2].min() + 0.001)))
+    scene = scene_of(work, placements)
+    edges = [("ground", "left", "supports"), ("ground", "right", "supports"), ("left", "right", "leans_on")]
+    graph = SupportGraph(objects=scene.ids, edges=[SupportEdge(*e) for e in edges], order=["left", "right"],
+                         dropped_edges=[SupportEdge("right", "left", "leans_on")])
+    out, rec = run(work, scene, graph)
+    assert rec["objects"]["left"]["stand_ins"] == ["right"]
+    for name in ("left", "right"):
+        cert = rec["objects"][name]["certificate"]
+        assert cert["settled"] and cert["joint_stable"], name
+        assert cert["displacement"] < 0.01 and cert["rotation_change"] < 2.0, (name, cert)
+    forgotten = SupportGraph(objects=scene.ids, edges=graph.edges, order=graph.order)
+    _, alone = run(work, scene, forgotten)
+    assert alone["objects"]["left"]["certificate"]["rotation_change"] == pytest.approx(20.0, abs=1.0)
+
+
 @pytest.mark.parametrize("lean", [True, False])
 def test_book_short_of_its_wall_is_moved_onto_it_not_turned(work, lean):
     # a 25 cm book standing on the floor at 20 deg off vertical, its top towards the wall x = 0.5 and 5 cm short of

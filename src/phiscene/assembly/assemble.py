@@ -163,7 +163,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
         ``settled``, ``settle_remedy``, ``residual_translation``, ``residual_rotation``,
         ``settle_translation``, ``settle_rotation``, ``displacement``, ``rotation_change``, ``seconds`` per
         stage) and a ``summary``; with ``params.faithful.enabled`` also ``flush_angle`` (and ``ray_shift``, m,
-        with ``ray`` and ``eye``; an attached object's ``attach_lift`` and, with ``fixtures``, ``fixture_clear``,
+        with ``ray`` and ``eye``; ``stand_ins``, what stood in for itself while it was placed, :func:`_stand_ins`;
+        an attached object's ``attach_lift`` and, with ``fixtures``, ``fixture_clear``,
         :func:`~phiscene.assembly.fixtures.clear_fixture`) and a
         ``certificate`` per object (:func:`~phiscene.assembly.certify.certificate`), and the summary lists the
         lost supporters, the remedies, the objects not stable in the final release (``joint_unstable``) and
@@ -193,6 +194,7 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     bases: dict[str, np.ndarray] = {o.id: np.asarray(o.base, dtype=float) for o in scene.objects if o.base is not None}
     surfaces: dict[str, np.ndarray] = {}  # faithful: upward surface samples per placed object (remedy onto)
     world_meshes: dict[str, object] = {}  # faithful: placed supporters' meshes at their grounded poses
+    stand_ins = _stand_ins(graph, order, attached) if params.faithful.enabled and params.settle else {}
     world_cm = BulletWorld(sim, cache_dir) if params.settle else contextlib.nullcontext()
     with world_cm as world:
         if params.settle:
@@ -227,6 +229,16 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
 
             fp = params.faithful
             info = None
+            # what it leans on that comes later (a support cycle broken: two planks leaning on each other) stands in
+            # for itself at its input pose, static, until this object is placed
+            stand = [q for q in stand_ins.get(oid, []) if q not in poses]
+            for q in stand:
+                _add_static(world, q, scene.get(q).mesh(), proxies[q], np.asarray(scene.get(q).pose, dtype=float),
+                            sim, masses.get(q))
+            context = placed + [sdf_body(q, scene.get(q).mesh(), np.asarray(scene.get(q).pose, dtype=float),
+                                         pp.n_context, pp, cache_dir) for q in stand if params.penetration]
+            if stand:
+                rec["stand_ins"] = stand
             if fp.enabled:
                 t0 = time.perf_counter()
                 pose, info = _faithful_start(scene, oid, proxies.get(oid), graph, poses, world_meshes, surfaces,
@@ -237,10 +249,10 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             t0 = time.perf_counter()
             if params.penetration:
                 if info is not None:
-                    pose = _resolve_faithful(scene, oid, pose, placed, poses, world_meshes, pp, fp, cache_dir, rec,
+                    pose = _resolve_faithful(scene, oid, pose, context, poses, world_meshes, pp, fp, cache_dir, rec,
                                              info)
                 else:
-                    pose = _resolve(oid, obj.mesh(), pose, placed, scene.ground_height, pp, cache_dir, rec,
+                    pose = _resolve(oid, obj.mesh(), pose, context, scene.ground_height, pp, cache_dir, rec,
                                     scene.structure)
             else:
                 rec.update(sdf_iterations=0, sdf_initial_loss=None, sdf_final_loss=None,
@@ -267,6 +279,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
                 rec.update(settle_frames=0, settled=None, settle_remedy=None, residual_translation=None,
                            residual_rotation=None, settle_translation=0.0, settle_rotation=0.0)
             rec["seconds"]["settle"] = time.perf_counter() - t0
+            for q in stand:
+                world.remove_body(q)
 
             t0 = time.perf_counter()
             poses[oid] = pose
@@ -317,6 +331,24 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     record = {"format": LOG_FORMAT, "order": order, "appended": appended, "params": params.to_dict(),
               "sim": sim.to_dict(), "objects": objects, "summary": summary}
     return _as_grounded(scene.with_poses(poses), attached, masses, bases), record
+
+
+def _stand_ins(graph, order: list[str], attached: dict[str, str]) -> dict[str, list[str]]:
+    """Object id -> the free objects it leans on that come after it in ``order``: the sources of ``leans_on`` edges
+    the support graph dropped to break a cycle (two planks leaning on each other, books leaning together).
+
+    Placed alone, the first of such a pair has nothing to lean on and falls; with the other standing in at its input
+    pose (static, in the settling world and in the SDF context) it rests leaning on it, and the other then leans on
+    it where it rests. The joint settling releases both together."""
+    if graph is None:
+        return {}
+    at = {o: i for i, o in enumerate(order)}
+    out: dict[str, list[str]] = {}
+    for e in graph.dropped_edges:
+        if e.relation == "leans_on" and e.source in at and e.target in at and at[e.source] > at[e.target] \
+                and e.source not in attached and e.target not in attached:
+            out.setdefault(e.target, []).append(e.source)
+    return out
 
 
 def _faithful_start(scene: Scene, oid: str, proxy: Proxy | None, graph, poses: dict[str, np.ndarray],
@@ -502,10 +534,12 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
 
     if graph is not None:
         edges = [e for e in graph.edges if e.target == oid]
+        # what it leans on in a support cycle the graph broke (:func:`_stand_ins`): still leaning, never flushed
+        cycle = [e for e in graph.dropped_edges if e.target == oid and e.relation == "leans_on"]
     else:
-        edges = []
+        edges, cycle = [], []
     parents = [e.source for e in edges] or ["ground"]
-    leaning = any(e.relation == "leans_on" for e in edges)
+    leaning = any(e.relation == "leans_on" for e in edges + cycle)
     below = [e.source for e in edges if e.relation in BELOW] or (["ground"] if not edges else [])
     mesh = obj.mesh()
     points = fixtures.shape_points(proxy, mesh)
@@ -521,7 +555,7 @@ def _faithful_info(scene: Scene, oid: str, obj, proxy: Proxy | None, graph, pose
     up = resting.support_normal(world_mesh, parents_world)
     flushable = not leaning and bool(below)
     normals = resting.cached_resting_normals(hull.vertices, cache_dir) if flushable else np.zeros((0, 3))
-    leaning_ids = [e.source for e in edges if e.relation == "leans_on"]
+    leaning_ids = [e.source for e in edges + cycle if e.relation == "leans_on"]
     return {"parents": parents, "below": below, "leaning": leaning_ids, "up": up, "normals": normals, "com": com,
             "flushable": flushable, "given_base": obj.base is not None, "flush_angle": 0.0,
             "flush_rotation": np.eye(3),
