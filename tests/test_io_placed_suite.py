@@ -189,6 +189,10 @@ def _scene_file(path: Path) -> dict:
     book = trimesh.creation.box((0.2, 0.04, 0.15))
     book_at = translation_matrix((0.4, 0.795, -0.2)) @ rotation_matrix(0.5, (0.0, 1.0, 0.0))
     s.add_geometry(book, node_name="book", geom_name="book", parent_node_name="Root", transform=book_at)
+    # what exporters add beside the objects: a camera (an empty node) and a point set
+    s.graph.update(frame_from="Root", frame_to="Camera", matrix=translation_matrix((0.0, 1.0, 3.0)))
+    s.add_geometry(trimesh.PointCloud(np.random.default_rng(0).normal(size=(50, 3))), node_name="markers",
+                   geom_name="markers", parent_node_name="Root")
     s.export(path)
     return {"wooden_table": np.vstack(table),
             "book": trimesh.transform_points(book.vertices, translation_matrix((0.0, 0.0, -1.5)) @ book_at)}
@@ -196,8 +200,8 @@ def _scene_file(path: Path) -> dict:
 
 def test_a_scene_file_imports_one_object_per_top_level_node(tmp_path, caplog):
     """`phiscene import-placed SCENE.glb OUT`: each node under the exporter's wrapper is an object, its parts merged
-    in the file's frame (the world vertices of the construction, y-up taken to z-up); the same file alone in a
-    folder is one object with a warning naming its nodes, and `--objects nodes` (`objects: nodes` in a suite) reads
+    in the file's frame (the world vertices of the construction, y-up taken to z-up), its camera and point set left
+    out with a warning; the same file alone in a folder is one object with a warning naming its nodes, and `--objects nodes` (`objects: nodes` in a suite) reads
     its nodes; a PLY cannot be a scene file."""
     from phiscene.io.placed import PlacedParams, import_placed, read_placed_dir, read_scene_file
     from phiscene.transforms import Y_UP_TO_Z_UP
@@ -205,8 +209,11 @@ def test_a_scene_file_imports_one_object_per_top_level_node(tmp_path, caplog):
     folder = tmp_path / "suite" / "room"
     folder.mkdir(parents=True)
     truth = _scene_file(folder / "room.glb")
-    objects = read_scene_file(folder / "room.glb")
+    with caplog.at_level("WARNING"):
+        objects = read_scene_file(folder / "room.glb")
     assert [o.id for o in objects] == ["book", "wooden_table"]
+    assert "2 top-level nodes without triangles left out (Camera, markers)" in caplog.text
+    caplog.clear()
     assert [o.description for o in objects] == ["book", "wooden table"]
     for o in objects:
         assert len(o.mesh.vertices) == len(truth[o.id])

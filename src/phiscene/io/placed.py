@@ -261,11 +261,11 @@ def read_placed_dir(folder: str | Path, placements: str | Path | dict | None = N
     else:
         found = [PlacedObject(object_id(f.stem), read_mesh(f), description_of(f.stem), f) for f in files]
         if len(files) == 1 and files[0].suffix.lower() in SCENE_SUFFIXES:
-            nodes = scene_nodes(files[0])
+            nodes = [n for n, parts in scene_nodes(files[0]).items() if parts]
             if len(nodes) > 1:
                 log.warning("%s holds %d top-level nodes (%s): imported as one object; with --objects nodes "
                             "(`objects: nodes` in a suite's source) each node is an object", files[0], len(nodes),
-                            ", ".join(list(nodes)[:4]) + (", ..." if len(nodes) > 4 else ""))
+                            ", ".join(nodes[:4]) + (", ..." if len(nodes) > 4 else ""))
     return _placed(found, folder, placements)
 
 
@@ -283,7 +283,7 @@ def read_scene_file(path: str | Path, placements: str | Path | dict | None = Non
     Raises
     ------
     InputError
-        Missing or unreadable file, not glTF/GLB, a node without triangles, two nodes with one id, bad or unknown
+        Missing or unreadable file, not glTF/GLB, no node with triangles, two nodes with one id, bad or unknown
         placements.
     """
     path = Path(path)
@@ -309,7 +309,7 @@ def scene_nodes(path: Path) -> dict[str, list[tuple[np.ndarray, trimesh.Trimesh]
         raise InputError(path, None, f"its nodes cannot be read as objects: a scene file is glTF or GLB "
                          f"({', '.join(SCENE_SUFFIXES)}); give a folder with one {path.suffix} file per object")
     try:
-        scene = trimesh.load_scene(path, process=False)
+        scene = trimesh.load_scene(path, process=False, skip_materials=True)  # geometry only, as load_mesh
     except Exception as exc:  # trimesh raises many types for corrupt files
         raise InputError(path, None, f"cannot read scene ({type(exc).__name__}: {str(exc)[:120]})") from None
     graph = scene.graph
@@ -337,11 +337,13 @@ def scene_nodes(path: Path) -> dict[str, list[tuple[np.ndarray, trimesh.Trimesh]
 
 
 def _node_objects(path: Path) -> list[PlacedObject]:
-    """:func:`scene_nodes` of one file as objects, each node's meshes merged in the file's frame."""
-    out = []
+    """:func:`scene_nodes` of one file as objects, each node's meshes merged in the file's frame; nodes without
+    triangles (an exporter's camera, lights, empties, point sets) are left out, with a warning naming them."""
+    out, empty = [], []
     for node, parts in scene_nodes(path).items():
         if not parts:
-            raise InputError(path, None, f"node {node!r} holds no triangles")
+            empty.append(node)
+            continue
         meshes = [m.copy().apply_transform(T) for T, m in parts]
         mesh = meshes[0] if len(meshes) == 1 else trimesh.util.concatenate(meshes)
         mesh = trimesh.Trimesh(np.asarray(mesh.vertices, dtype=float), np.asarray(mesh.faces), process=False)
@@ -350,6 +352,8 @@ def _node_objects(path: Path) -> list[PlacedObject]:
         out.append(PlacedObject(object_id(node), mesh, description_of(node), path, node))
     if not out:
         raise InputError(path, None, "no nodes with triangles in the file")
+    if empty:
+        log.warning("%s: %d top-level nodes without triangles left out (%s)", path, len(empty), ", ".join(empty))
     return out
 
 
