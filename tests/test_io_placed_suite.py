@@ -201,8 +201,8 @@ def _scene_file(path: Path) -> dict:
 def test_a_scene_file_imports_one_object_per_top_level_node(tmp_path, caplog):
     """`phiscene import-placed SCENE.glb OUT`: each node under the exporter's wrapper is an object, its parts merged
     in the file's frame (the world vertices of the construction, y-up taken to z-up), its camera and point set left
-    out with a warning; the same file alone in a folder is one object with a warning naming its nodes, and `--objects nodes` (`objects: nodes` in a suite) reads
-    its nodes; a PLY cannot be a scene file."""
+    out with a warning; the same file alone in a folder is one object with a warning naming its nodes, and
+    `--objects nodes` (`objects: nodes` in a suite) reads its nodes; a PLY cannot be a scene file."""
     from phiscene.io.placed import PlacedParams, import_placed, read_placed_dir, read_scene_file
     from phiscene.transforms import Y_UP_TO_Z_UP
 
