@@ -11,6 +11,8 @@ Scenes:
 * ``layout``: a floor slab, a wall, a table, a box on it, a poster touching the wall (the room's own meshes named
   as such: reason ``structure``);
 * ``quads``: the same with the floor and the wall as single flat quads (made slabs at import);
+* ``overlap``: a wall mesh reaching through the floor slab and under the ground, a table, a poster (the room's own
+  meshes are kept where they are, never lifted or cleared of each other);
 * ``aframe``: two 60 cm planks leaning on each other 20 deg off vertical, and a box (the support cycle's stand-in);
 * ``rug``: a 6 mm rug, a coffee table on it, a sheet of paper, a plate and an orange on the table;
 * ``duplicate``: a table and the same box twice in place (a duplicate detection);
@@ -66,6 +68,14 @@ def layout(folder: Path, flat: bool = False) -> Path:
         _save(folder, "white_wall", *_box((4.0, 0.05, 2.5), (0.0, 2.025, 1.25)))
     _save(folder, "wooden_table", _table(), translation_matrix((0.0, 0.5, 0.01)))
     _save(folder, "cardboard_box", *_box((0.3, 0.2, 0.1), (0.2, 0.5, 0.81)))
+    _save(folder, "framed_poster", *_box((0.6, 0.02, 0.4), (-1.0, 1.99, 1.5)))
+    return folder
+
+
+def overlap(folder: Path) -> Path:
+    _save(folder, "floor", *_box((4.0, 4.4, 0.05), (0.0, 0.2, -0.025)))
+    _save(folder, "white_wall", *_box((4.0, 0.1, 2.6), (0.0, 2.05, 1.2)))  # through the floor slab, as layouts' are
+    _save(folder, "wooden_table", _table(), translation_matrix((0.0, 0.5, 0.01)))
     _save(folder, "framed_poster", *_box((0.6, 0.02, 0.4), (-1.0, 1.99, 1.5)))
     return folder
 
@@ -139,7 +149,7 @@ def scene_file(folder: Path) -> Path:
     return path
 
 
-SCENES = {"layout": layout, "quads": lambda f: layout(f, flat=True), "aframe": aframe, "rug": rug,
+SCENES = {"layout": layout, "quads": lambda f: layout(f, flat=True), "overlap": overlap, "aframe": aframe, "rug": rug,
           "duplicate": duplicate, "ceiling": ceiling, "lean": lean, "scene_file": scene_file}
 
 

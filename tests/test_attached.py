@@ -113,14 +113,17 @@ def test_the_room_s_own_meshes_are_read_from_the_head_noun():
 
 
 def test_a_wall_mesh_and_a_floor_mesh_stay_put_and_keep_what_they_carry(tmp_path):
-    """A reconstruction that meshes its floor and a wall as objects: both are attached where they are (a free wall
-    mesh falls across the room); the poster touching the wall mesh is still attached (the wall holds it only from
-    below, and nothing lies under the poster); the box standing on the floor mesh stays free and rests on it."""
+    """A reconstruction that meshes its floor and a wall as objects: both are attached and kept exactly where they
+    are, the wall reaching through the floor mesh and under the ground (a free wall mesh falls across the room; an
+    attached one would be lifted out of the ground and cleared of the floor mesh); the poster touching the wall mesh
+    is still attached (the wall holds it only from below, and nothing lies under the poster); the box standing on
+    the floor mesh stays free and rests on it."""
     boxes = {"floor": (3.0, 3.0, 0.05), "wall": (3.0, 0.05, 2.5), "poster": (0.6, 0.01, 0.8), "box": (0.3, 0.3, 0.3)}
     mesh = {n: save_mesh(trimesh.creation.box(s), tmp_path / f"{n}.obj") for n, s in boxes.items()}
     scene = Scene([
         SceneObject("floor", mesh["floor"], make_pose(translation=[0, 0, 0.025]), "wooden floor"),
-        SceneObject("wall", mesh["wall"], make_pose(translation=[0, 1.525, 1.3]), "white wall"),
+        # the wall mesh reaches through the floor mesh and 5 cm under the ground, as layouts' walls do
+        SceneObject("wall", mesh["wall"], make_pose(translation=[0, 1.525, 1.2]), "white wall"),
         SceneObject("poster", mesh["poster"], make_pose(translation=[0.5, 1.495, 1.5]), "paper poster"),
         SceneObject("box", mesh["box"], make_pose(translation=[-0.5, 0.0, 0.2 + 0.03]), "cardboard box"),
     ])
@@ -130,8 +133,9 @@ def test_a_wall_mesh_and_a_floor_mesh_stay_put_and_keep_what_they_carry(tmp_path
     g = topology.infer(scene, "geometric", {})
     assert attached_ids(g) == ["floor", "wall", "poster"] and g.parents("box") == ["floor"]
     fixed = attached_ids(g, holders=True)
-    out, record = ground_scene(scene, g.order, proxies, AssemblyParams(), SIM, cache, attached=fixed)
-    for oid in ("wall", "poster"):
+    faithful = AssemblyParams.from_dict({"faithful": {"enabled": True}})  # phi_scene's: flushes and clears fixtures
+    out, record = ground_scene(scene, g.order, proxies, faithful, SIM, cache, graph=g, attached=fixed)
+    for oid in ("floor", "wall", "poster"):  # never lifted out of the ground or cleared of each other
         np.testing.assert_array_equal(out.get(oid).pose, scene.get(oid).pose)
     # the box comes down the 3 cm onto the floor mesh's top (z = 0.05): its bottom within a millimetre below (the
     # simulator's contact) and the clearance above it

@@ -45,6 +45,7 @@ from phiscene.params import Params
 from phiscene.proxies import Proxy, check_proxies, with_base, with_bases
 from phiscene.scene import Scene, as_written
 from phiscene.sim.settings import SimSettings
+from phiscene.topology.attached import STRUCTURE
 from phiscene.transforms import decompose, transform_points, turned_about
 
 log = logging.getLogger(__name__)
@@ -195,6 +196,8 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
     surfaces: dict[str, np.ndarray] = {}  # faithful: upward surface samples per placed object (remedy onto)
     world_meshes: dict[str, object] = {}  # faithful: placed supporters' meshes at their grounded poses
     stand_ins = _stand_ins(graph, order, attached) if params.faithful.enabled and params.settle else {}
+    structure = {o for o, why in (graph.meta.get("attached", {}) if graph is not None else {}).items()
+                 if why == STRUCTURE and o in attached}
     world_cm = BulletWorld(sim, cache_dir) if params.settle else contextlib.nullcontext()
     with world_cm as world:
         if params.settle:
@@ -207,10 +210,12 @@ def ground_scene(scene: Scene, order: list[str], proxies: dict[str, Proxy], para
             rec: dict = {"index": index, "seconds": {}}
 
             if oid in attached:
-                if params.faithful.enabled and params.faithful.flush:
+                # the room's own meshes (a wall, the floor) are where the room is: never turned, lifted or cleared
+                adjust = params.faithful.enabled and oid not in structure
+                if adjust and params.faithful.flush:
                     pose = fixtures.flush_fixture(scene, obj, proxies.get(oid), attached[oid],
                                                   params.faithful.max_flush_angle, cache_dir, rec)
-                if params.faithful.enabled and params.faithful.fixtures and params.penetration:
+                if adjust and params.faithful.fixtures and params.penetration:
                     pose = fixtures.clear_fixture(scene, oid, pose, attached[oid],
                                                   [b for b in placed if b.id in attached], pp,
                                                   params.faithful.contact_tol, cache_dir, rec)
