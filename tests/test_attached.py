@@ -10,7 +10,7 @@ from phiscene import topology
 from phiscene.assembly import AssemblyParams, ground_scene
 from phiscene.meshes import save_mesh
 from phiscene.metrics.drift import drift_mujoco
-from phiscene.metrics.physical import PhysicalParams, physical_metrics
+from phiscene.metrics.physical import PhysicalParams, contact_validity, physical_metrics
 from phiscene.proxies import ProxyParams, scene_proxies
 from phiscene.scene import Plane, Scene, SceneObject
 from phiscene.sim.settings import SimSettings
@@ -142,6 +142,15 @@ def test_a_wall_mesh_and_a_floor_mesh_stay_put_and_keep_what_they_carry(tmp_path
     bottom, top = out.get("box").world_mesh().bounds[0, 2], out.get("floor").world_mesh().bounds[1, 2]
     assert top == pytest.approx(0.05) and top - 0.001 <= bottom <= top + 0.006
     assert record["objects"]["box"]["settled"]
+    # penetration: the room's meshes are not measured against the ground or each other; read as any attached
+    # objects, the wall is 5 cm into the ground and the floor slab reaches 5 cm into the wall
+    per = contact_validity(out, PhysicalParams(samples=512))["objects"]
+    assert per["wall"]["pen_depth"] < 1e-4 and per["floor"]["pen_depth"] < 1e-4  # the poster and box touch them
+    unnamed = out.with_poses({})
+    for k, o in enumerate(unnamed.objects):
+        o.description = f"object {k}"
+    per = contact_validity(unnamed, PhysicalParams(samples=512))["objects"]
+    assert per["wall"]["pen_depth"] == pytest.approx(0.05, abs=0.005)
 
 
 def test_decision_from_geometry_and_description(room):

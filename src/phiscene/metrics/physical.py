@@ -40,7 +40,10 @@ Post-simulation drift (pybullet)
 
 Attached objects (:attr:`phiscene.scene.SceneObject.attached`: fixed to a wall, the ceiling or the ground) are
 static colliders in both simulators, are not lifted, and are left out of the drift and floating means (their
-per-object entries say ``attached``); they still count in the penetration depth.
+per-object entries say ``attached``); they still count in the penetration depth. The room's own meshes among them
+(a floor or wall mesh, :func:`phiscene.topology.words.names_structure`) are not measured against the ground plane
+or against each other: a floor slab runs through the ground plane, a wall through the floor slab, and neither is an
+overlap of two things (what else reaches into them still counts).
 
 Units: metres and degrees.
 """
@@ -160,6 +163,8 @@ def contact_validity(scene: "Scene", params: PhysicalParams, prune: bool = True)
     "closest": id | "ground" | None, "pen_depth": m, "float_dist": m | None}}}``
     """
     from phiscene.sdf import sign_box, signed_distance_for
+    from phiscene.topology.attached import object_text
+    from phiscene.topology.words import names_structure
 
     objs = scene.objects
     k = len(objs)
@@ -174,10 +179,12 @@ def contact_validity(scene: "Scene", params: PhysicalParams, prune: bool = True)
 
     best = np.full(k, np.inf)
     closest: list[str | None] = [None] * k
+    room = {i for i, o in enumerate(objs) if o.attached is not None and names_structure(object_text(o))}
     if params.include_ground:
         for i in range(k):
-            best[i] = float(samples[i][:, 2].min() - scene.ground_height)
-            closest[i] = GROUND
+            if i not in room:  # the room's own meshes are the ground and walls (module notes)
+                best[i] = float(samples[i][:, 2].min() - scene.ground_height)
+                closest[i] = GROUND
     evaluated = 0
     if k > 1:
         boxes = np.array([sign_box(m) for m in meshes])  # (k, 2, 3)
@@ -185,6 +192,8 @@ def contact_validity(scene: "Scene", params: PhysicalParams, prune: bool = True)
         iu, ju = np.triu_indices(k, 1)
         order = np.lexsort((ju, iu, gaps[iu, ju]))
         for i, j in zip(iu[order], ju[order]):
+            if i in room and j in room:
+                continue
             g = gaps[i, j]
             if prune and g > 0.0 and g >= max(best[i], best[j]):
                 if g >= best.max():
