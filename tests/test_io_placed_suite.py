@@ -115,6 +115,12 @@ def test_a_folder_of_placed_scenes_is_a_workflow_suite(tmp_path):
     assert bad.returncode != 0 and "suites.mine.source" in said and "upp" in said, said[-2000:]
 
 
+def _phiscene(cwd: Path, *args: str) -> subprocess.CompletedProcess:
+    """The ``phiscene`` command run in ``cwd``."""
+    return subprocess.run([sys.executable, "-m", "phiscene.cli", *args], capture_output=True, text=True, cwd=cwd,
+                          timeout=300)
+
+
 def test_import_placed_command_takes_the_camera(tmp_path):
     """`phiscene import-placed DIR OUT --placements P --camera C`: the REST3D twin's scene and camera; a bad camera
     file is one error line naming it."""
@@ -123,11 +129,7 @@ def test_import_placed_command_takes_the_camera(tmp_path):
     _as_placed(tmp_path / "r3d", "s", folder)
     twin = import_rest3d(tmp_path / "r3d", "s", tmp_path / "twin")
 
-    def phiscene(*args):
-        return subprocess.run([sys.executable, "-m", "phiscene.cli", *args], capture_output=True, text=True,
-                              cwd=tmp_path, timeout=300)
-
-    res = phiscene("import-placed", str(folder), str(tmp_path / "out"), "--placements",
+    res = _phiscene(tmp_path, "import-placed", str(folder), str(tmp_path / "out"), "--placements",
                    str(folder / "placements.json"), "--camera", str(folder / "camera.json"))
     assert res.returncode == 0, res.stderr[-2000:]
     out = load_scene(tmp_path / "out" / "initial" / "scene.json")
@@ -136,7 +138,8 @@ def test_import_placed_command_takes_the_camera(tmp_path):
     cams = [json.loads((tmp_path / d / "reference" / "camera.json").read_text()) for d in ("twin", "out")]
     assert np.allclose(cams[0]["world_to_camera"], cams[1]["world_to_camera"], atol=1e-9)
     (tmp_path / "bad.json").write_text('{"eye": [0, 1, 2], "target": [0, 1, 2], "fov_y_deg": 50}')
-    res = phiscene("import-placed", str(folder), str(tmp_path / "bad"), "--camera", str(tmp_path / "bad.json"))
+    res = _phiscene(tmp_path, "import-placed", str(folder), str(tmp_path / "bad"), "--camera",
+                    str(tmp_path / "bad.json"))
     assert res.returncode == 1 and res.stderr.strip().count("\n") == 0 and "apart" in res.stderr, res.stderr
     assert not (tmp_path / "bad").exists()
 
@@ -234,14 +237,10 @@ def test_a_scene_file_imports_one_object_per_top_level_node(tmp_path, caplog):
                       "params": {"level": False}}, "room", tmp_path / "suite_out")
     assert load_scene(tmp_path / "suite_out" / "initial" / "scene.json").ids == ["book", "wooden_table"]
 
-    def phiscene(*args):
-        return subprocess.run([sys.executable, "-m", "phiscene.cli", *args], capture_output=True, text=True,
-                              cwd=tmp_path, timeout=300)
-
-    res = phiscene("import-placed", str(folder / "room.glb"), str(tmp_path / "cli"), "--no-level")
+    res = _phiscene(tmp_path, "import-placed", str(folder / "room.glb"), str(tmp_path / "cli"), "--no-level")
     assert res.returncode == 0, res.stderr[-2000:]
     assert load_scene(tmp_path / "cli" / "initial" / "scene.json").ids == ["book", "wooden_table"]
-    res = phiscene("import-placed", str(folder / "room.glb"), str(tmp_path / "cli2"), "--objects", "files")
+    res = _phiscene(tmp_path, "import-placed", str(folder / "room.glb"), str(tmp_path / "cli2"), "--objects", "files")
     assert res.returncode == 1 and res.stderr.strip().count("\n") == 0 and "scene file" in res.stderr, res.stderr
 
     objects[0].mesh.export(tmp_path / "book.ply")

@@ -25,7 +25,6 @@ import numpy as np
 
 from phiscene.errors import InputError
 
-#: Source kind -> ``module:function(source, scene, out_dir)`` importing one of its scenes (:func:`run_source_scene`).
 #: Up-axis conventions a placed-mesh source may declare (:attr:`phiscene.io.placed.PlacedParams.up`): glTF's ``y``,
 #: ``z``, and the others signed (``-y``: OpenCV's camera frame, y down).
 UP_AXES = ("y", "z", "x", "-x", "-y", "-z")
@@ -33,6 +32,7 @@ UP_AXES = ("y", "z", "x", "-x", "-y", "-z")
 #: each glTF/GLB file's top-level nodes.
 OBJECT_MODES = ("files", "nodes")
 
+#: Source kind -> ``module:function(source, scene, out_dir)`` importing one of its scenes (:func:`run_source_scene`).
 SCENE_IMPORTERS = {
     "sam3d": "phiscene.io.sam3d:run_sam3d_scene",
     "placed": "phiscene.io.placed_suite:run_placed_scene",

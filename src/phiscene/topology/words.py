@@ -59,12 +59,12 @@ def says_mounted(description: str) -> bool:
     return names_wall_object(description) or any(p in description.lower() for p in MOUNT_PHRASES)
 
 
-def head_words(description: str) -> list[str]:
-    """The lower-case words of a description's head: those before its first :data:`HEAD_END` preposition
-    ("white curtains on the left window" -> ["white", "curtains"])."""
+def head_words(description: str, end: tuple[str, ...] = ()) -> list[str]:
+    """The lower-case words of a description's head: those before its first :data:`HEAD_END` preposition, or its
+    first word of ``end`` ("white curtains on the left window" -> ["white", "curtains"])."""
     head = []
     for w in re.findall(r"[a-z]+", description.lower()):
-        if w in HEAD_END:
+        if w in HEAD_END or w in end:
             break
         head.append(w)
     return head
@@ -80,11 +80,11 @@ def says_partial(description: str) -> bool:
     return has_word(description, PARTIAL_WORDS)
 
 
-def head_noun(description: str) -> str:
-    """The last word of a description's head (:func:`head_words`), trailing qualifiers and units (:data:`TRAILING`)
-    skipped: "white and gold table lamp on nightstand" -> "lamp",
+def head_noun(description: str, end: tuple[str, ...] = ()) -> str:
+    """The last word of a description's head (:func:`head_words`, ending also at a word of ``end``), trailing
+    qualifiers and units (:data:`TRAILING`) skipped: "white and gold table lamp on nightstand" -> "lamp",
     "wooden chair 87 cm" -> "chair", "wooden cabinet partially visible in the bottom left" -> "cabinet"."""
-    head = head_words(description)
+    head = head_words(description, end)
     while head and head[-1] in TRAILING:
         head.pop()
     return head[-1] if head else ""
@@ -101,14 +101,7 @@ def names_structure(description: str) -> bool:
     "wooden floor on the left", "back wall of the room" yes; "wall clock", "floor lamp", "ceiling fan", "basket
     hanging from ceiling" no. The head ends at a :data:`HEAD_END` preposition or one of :data:`STRUCTURE_HEAD_END`,
     so what the object hangs from or belongs to is not read as the object."""
-    words = []
-    for w in head_words(description):
-        if w in STRUCTURE_HEAD_END:
-            break
-        words.append(w)
-    while words and words[-1] in TRAILING:
-        words.pop()
-    return bool(words) and words[-1] in STRUCTURE_WORDS
+    return head_noun(description, STRUCTURE_HEAD_END) in STRUCTURE_WORDS
 
 
 def says_against_wall(description: str) -> bool:
