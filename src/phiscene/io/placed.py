@@ -359,7 +359,7 @@ def _node_objects(path: Path) -> list[PlacedObject]:
 
 def _placed(objects: list[PlacedObject], where: Path, placements: str | Path | dict | None) -> list[PlacedObject]:
     """``objects`` with their placements applied (module docstring; keyed by file stem, node name or object id),
-    checked for ids used twice and for placements of objects that are not there."""
+    checked for ids used twice (:func:`unique_ids`) and for placements of objects that are not there."""
     if isinstance(placements, (str, Path)):
         where = Path(placements)
         try:
@@ -370,19 +370,15 @@ def _placed(objects: list[PlacedObject], where: Path, placements: str | Path | d
     if not isinstance(placements, dict):
         raise InputError(where, None, f"expected a mapping of object ids (file stems) to placements, got a "
                          f"{type(placements).__name__}")
-    seen: dict[str, PlacedObject] = {}
+    unique_ids(objects)
     names = set()
     for o in objects:
-        if o.id in seen:
-            raise InputError(o.source, None, f"object id {o.id!r} is also the id of {seen[o.id].origin} (ids keep "
-                             "only [A-Za-z0-9_.-] of a name: rename one of them)")
-        seen[o.id] = o
         name = o.node if o.node is not None else o.source.stem
         names.add(name)
         if name in placements or o.id in placements:
             key = name if name in placements else o.id
             o.mesh.apply_transform(placement_matrix(placements[key], where, key))
-    unknown = sorted(set(placements) - names - set(seen))
+    unknown = sorted(set(placements) - names - {o.id for o in objects})
     if unknown:
         raise InputError(where, None, f"placements for objects without a mesh: {unknown}")
     return objects
@@ -518,23 +514,29 @@ def solid_structure(objects: list[PlacedObject], thickness: float = STRUCTURE_TH
     return out
 
 
+def unique_ids(objects: list[PlacedObject]) -> None:
+    """Raise :class:`InputError` naming the second of two objects with one id and where the first came from
+    (:attr:`PlacedObject.origin`)."""
+    seen: dict[str, PlacedObject] = {}
+    for o in objects:
+        if o.id in seen:
+            raise InputError(o.source, None, f"object id {o.id!r} is also the id of {seen[o.id].origin} (ids keep "
+                             "only [A-Za-z0-9_.-] of a name: rename one of them)")
+        seen[o.id] = o
+
+
 def check_placed(objects: list[PlacedObject], camera: Camera | None, out_dir: Path) -> None:
     """The checks of :func:`import_placed` that need no levelling, on objects and camera in metres (``InputError``
     naming the file and the problem); a warning for a scene whose median object is implausibly large or small in
     metres (:data:`PLAUSIBLE_MEDIAN_DIAGONAL`; the room's own meshes, a floor or a wall, left out of the median)."""
     from phiscene.meshes import check_mesh
+    from phiscene.topology.words import names_structure
 
     if not objects:
         raise InputError(out_dir, None, "no objects to import")
-    seen: dict[str, Path] = {}
+    unique_ids(objects)
     for o in objects:
-        if o.id in seen:
-            raise InputError(o.source, None, f"object id {o.id!r} is also the id of {seen[o.id]} (ids keep only "
-                             "[A-Za-z0-9_.-] of a name: rename one of them)")
-        seen[o.id] = o.source
         check_mesh(o.mesh, o.source)
-    from phiscene.topology.words import names_structure
-
     # the room's own meshes (a floor, a wall) are metres across in any scene
     sized = [o for o in objects if not names_structure(o.description)] or objects
     median = float(np.median([np.linalg.norm(o.mesh.extents) for o in sized]))
