@@ -203,7 +203,7 @@ def test_a_solid_that_cannot_cover_the_mesh_is_not_decomposed(monkeypatch):
     cells) loses the fin, so the fin's tip lies about 8 cm outside the convex hull of the solid's surface, and no
     decomposition of that surface can cover it (tolerance 2 % of the diagonal, 7 mm). The solid route is given up
     before the decomposition runs on it: the decomposition (here a stand-in returning the convex hull of what it
-    is given) runs once, on the mesh's outer shell."""
+    is given) runs once, on the closed wrap of the mesh's outer shell."""
     import phiscene.proxies as proxies
 
     ball, _ = double_wall(radius=0.1, wall=0.004, subdivisions=3)
@@ -213,9 +213,11 @@ def test_a_solid_that_cannot_cover_the_mesh_is_not_decomposed(monkeypatch):
     shell = outer_shell(mesh)
     assert solid_surface(shell, ProxyParams().solid_resolution).bounds[1, 0] < 0.11  # the grid lost the fin
     calls = []
-    monkeypatch.setattr(proxies, "_decompose", lambda m, p: calls.append(len(m.faces)) or [m.convex_hull.vertices])
+    monkeypatch.setattr(proxies, "_decompose",
+                        lambda m, p, closed=False: calls.append((len(m.faces), closed)) or [m.convex_hull.vertices])
     hulls, route = decompose_route(mesh, ProxyParams(convex_tolerance=0.0))
-    assert route == "decomposed" and calls == [len(shell.faces)]
+    assert not shell.is_watertight  # the shell (the ball's outer wall and the fin) is wrapped for CoACD
+    assert route == "decomposed" and len(calls) == 1 and calls[0][1]
     _, outside, _ = fidelity(mesh, hulls)
     assert outside <= ProxyParams().solid_tolerance * float(np.linalg.norm(mesh.extents))
 
@@ -233,7 +235,7 @@ def test_a_solid_route_lost_is_not_tried_again_by_the_finer_decomposition(monkey
     path = tmp_path / "finned.obj"
     trimesh.util.concatenate([ball, fin]).export(path)
     fat = trimesh.creation.box((0.5, 0.5, 0.5)).vertices  # reaches 0.15 m and more beyond the 0.1 m ball
-    monkeypatch.setattr(proxies, "_decompose", lambda m, p: [fat + 1e-3 * k for k in range(p.max_hulls)])
+    monkeypatch.setattr(proxies, "_decompose", lambda m, p, closed=False: [fat + 1e-3 * k for k in range(p.max_hulls)])
     tried = []
     real_solid = proxies._decompose_solid
     monkeypatch.setattr(proxies, "_decompose_solid", lambda *a: tried.append(a[3].max_hulls) or real_solid(*a))
