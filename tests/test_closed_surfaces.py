@@ -12,7 +12,7 @@ import trimesh
 
 import phiscene.proxies as proxies
 from phiscene.proxies import ProxyParams, decompose_route, fidelity
-from phiscene.solid import is_closed_manifold, simplified_closed, solid_surface, wrapped_surface
+from phiscene.solid import drawn_in, is_closed_manifold, simplified_closed, solid_surface, wrapped_surface
 
 
 def sheet(size: float = 0.1, divisions: int = 8) -> trimesh.Trimesh:
@@ -43,6 +43,22 @@ def test_the_wrap_of_an_open_sheet_is_a_closed_slab_of_twice_the_offset():
     assert np.allclose(hi[:2], 0.05 + offset * cell, atol=0.25 * cell)
     assert np.allclose(lo[:2], -0.05 - offset * cell, atol=0.25 * cell)
     assert wrap.contains(mesh.vertices * 0.999).all()  # the whole sheet inside
+
+
+def test_a_wrap_drawn_in_lies_at_the_gap_from_the_mesh():
+    """Drawn in, a sphere's wrap lies ``gap`` outside the sphere (its vertices; the oracle is the radius), and an
+    open sheet's wrap is a slab of twice ``gap`` (its vertices on the planes z = +-gap, none lost)."""
+    ball = trimesh.creation.icosphere(4, 0.05)
+    wrap = wrapped_surface(ball, 20, proxies.WRAP_OFFSET)
+    gap = 0.0005
+    hugged = drawn_in(wrap, ball, gap)
+    r = np.linalg.norm(hugged.vertices, axis=1)
+    # the vertices' closest points lie on the icosphere's flat faces, at most its sagitta (< 0.2 mm) inside 5 cm
+    assert np.all(r <= 0.05 + gap + 1e-9) and np.all(r >= 0.05 - 2e-4 + gap)
+    assert np.array_equal(hugged.faces, wrap.faces)
+    flat = sheet()
+    slab = drawn_in(wrapped_surface(flat, 20, proxies.WRAP_OFFSET), flat, gap)
+    assert np.allclose(np.abs(slab.vertices[:, 2])[np.abs(slab.vertices[:, :2]).max(axis=1) < 0.049], gap)
 
 
 def test_a_closed_surface_simplified_stays_closed_and_within_its_tolerance():

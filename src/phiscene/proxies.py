@@ -43,6 +43,10 @@ CLOSED_SIMPLIFY = 0.25
 #: The decomposed route's wrap lies this many grid cells outside the mesh: more than half a cell, so no sheet of
 #: the mesh is lost however thin (:func:`phiscene.solid.wrapped_surface`).
 WRAP_OFFSET = 0.6
+#: ... and is then drawn in to this many cells from the mesh (:func:`phiscene.solid.drawn_in`): the wrap's offset
+#: alone thickened a reconstructed chair's legs by 1.5 cm, and the suite's grounding moved chairs tucked under a
+#: table farther (docs/measurements.md, "CoACD on closed surfaces").
+WRAP_GAP = 0.1
 #: Settings of :func:`proxy_for_mesh`'s refinement, not of one decomposition (left out of its cache key).
 REFINE_KEYS = ("refine_excess", "refine_max_hulls")
 
@@ -345,7 +349,8 @@ def _routed(mesh: trimesh.Trimesh, params: ProxyParams, vertices: int,
         wrap = wrapped_surface(shell, params.preprocess_resolution, WRAP_OFFSET)
         if len(wrap.faces) >= 4 and wrap.is_watertight:
             cell = float(shell.extents.max()) / params.preprocess_resolution
-            return fit_to_mesh(_decompose_closed(wrap, params, cell), mesh, vertices), "decomposed", lost
+            hulls = _decompose_closed(wrap, params, cell, hug=(shell, WRAP_GAP * cell))
+            return fit_to_mesh(hulls, mesh, vertices), "decomposed", lost
     return fit_to_mesh(_decompose(work, params), mesh, vertices), "decomposed", lost
 
 
@@ -480,16 +485,20 @@ def _decompose_solid(shell: trimesh.Trimesh, mesh: trimesh.Trimesh, tol: float,
     return _decompose_closed(surface, params, float(shell.extents.max()) / params.solid_resolution)
 
 
-def _decompose_closed(surface: trimesh.Trimesh, params: ProxyParams, cell: float) -> list[np.ndarray]:
+def _decompose_closed(surface: trimesh.Trimesh, params: ProxyParams, cell: float,
+                      hug: tuple[trimesh.Trimesh, float] | None = None) -> list[np.ndarray]:
     """CoACD on a closed surface phiscene made on a grid of ``cell`` (m): simplified to :data:`CLOSED_SIMPLIFY`
-    of a cell (:func:`phiscene.solid.simplified_closed`) and decomposed without CoACD's manifold preprocessing.
+    of a cell (:func:`phiscene.solid.simplified_closed`), given ``hug`` ``(mesh, gap)`` drawn in to ``gap`` from
+    that mesh (:func:`phiscene.solid.drawn_in`), and decomposed without CoACD's manifold preprocessing.
 
     CoACD's ``auto`` preprocessing remeshed such a surface where its own manifold test failed on it: 28.7 s
     instead of 0.8 s for a reconstructed pear's solid (docs/measurements.md, "CoACD on closed surfaces").
     """
-    from phiscene.solid import is_closed_manifold, simplified_closed
+    from phiscene.solid import drawn_in, is_closed_manifold, simplified_closed
 
     small = simplified_closed(surface, CLOSED_SIMPLIFY * cell)
+    if hug is not None:
+        small = drawn_in(small, *hug)
     return _decompose(small, params, closed=is_closed_manifold(small))
 
 

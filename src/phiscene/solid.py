@@ -385,6 +385,33 @@ def wrapped_surface(mesh: trimesh.Trimesh, resolution: int, offset: float) -> tr
     return grid_surface(axes, h, field, level=offset * h)
 
 
+def drawn_in(surface: trimesh.Trimesh, mesh: trimesh.Trimesh, gap: float) -> trimesh.Trimesh:
+    """``surface`` (a wrap of ``mesh``) with each vertex moved to ``gap`` (m) from its closest point on ``mesh``,
+    on the side it lies: the wrap's connectivity (closed, what is enclosed filled, what is open left open) on
+    the mesh's own surface, where a wrap stands off it by its offset everywhere (a reconstructed chair's legs
+    thickened by 1.5 cm on a 40-cell grid). A thin sheet stays a slab of twice ``gap``. Faces between moved
+    vertices are not checked for crossing one another.
+
+    Returns
+    -------
+    trimesh.Trimesh
+        The same faces; vertices (v, 3) moved.
+    """
+    import igl
+
+    v = np.asarray(surface.vertices, dtype=float)
+    origin = v.mean(axis=0)
+    tree = igl.AABB()
+    mv = np.ascontiguousarray(np.asarray(mesh.vertices, dtype=float) - origin)
+    mf = np.ascontiguousarray(np.asarray(mesh.faces, dtype=np.int64))
+    tree.init(mv, mf)
+    _, _, closest = tree.squared_distance(mv, mf, np.ascontiguousarray(v - origin))
+    away = v - origin - closest
+    length = np.linalg.norm(away, axis=1, keepdims=True)
+    moved = np.where(length > 0, closest + gap * away / np.where(length > 0, length, 1.0), v - origin)
+    return trimesh.Trimesh(moved + origin, np.asarray(surface.faces), process=False)
+
+
 def _grid_axes(mesh: trimesh.Trimesh, resolution: int, offset: float) -> tuple[list[np.ndarray], float]:
     """Node coordinates (nx,), (ny,), (nz,) of a grid of ``resolution`` cells along ``mesh``'s longest axis,
     padded by two cells beyond ``offset`` cells around its bounds, and the cell size (m)."""
