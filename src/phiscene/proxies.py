@@ -76,10 +76,11 @@ class ProxyParams(Params):
         decimating to 96 itself, ``custom_viga``'s proxies had 45 pieces and took 74 s instead of 31 in 22 s.
     preprocess_resolution
         Cells along the longest axis of the grid on which a mesh that is not closed is wrapped for CoACD (a
-        closed surface 0.6 cells outside it, :func:`phiscene.solid.wrapped_surface`), as CoACD's own
-        manifold preprocessing does on its voxels (which it still does on a closed mesh that its manifold test
-        refuses). The wrap is simplified and decomposed without that preprocessing: a reconstructed plate's
-        decomposition took 3.5 s instead of 7.0 s (docs/measurements.md, "CoACD on closed surfaces").
+        closed surface :data:`WRAP_OFFSET` cells outside it, :func:`phiscene.solid.wrapped_surface`, simplified,
+        then drawn in to :data:`WRAP_GAP` cells from the mesh), as CoACD's own manifold preprocessing does on its
+        voxels (which it still does on a closed mesh that its manifold test refuses). The wrap is decomposed
+        without that preprocessing: CoACD took 0.7-2.8 s on a reconstructed plate's wrap against 7.0 s on its
+        decimated surface (docs/measurements.md, "CoACD on closed surfaces").
     resolution
         CoACD sampling resolution / V-HACD voxel resolution.
     mcts_iterations, mcts_nodes, mcts_max_depth
