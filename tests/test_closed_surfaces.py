@@ -128,3 +128,18 @@ def test_a_closed_mesh_goes_to_coacd_as_it_is(monkeypatch):
     mesh = trimesh.creation.annulus(0.05, 0.1, 0.04)
     hulls, route = decompose_route(mesh, ProxyParams(convex_tolerance=0.0))
     assert route == "decomposed" and seen == [(len(mesh.faces), False)]
+
+
+def test_surface_distance_counts_every_face():
+    """Distance to a double-walled sphere's surface as it is: a point in the cavity is as far as the inner wall
+    (the oracle: radius - wall - |p|), where the solid's distance (outer shell) would give the outer wall."""
+    from phiscene.sdf import surface_distance
+
+    outer = trimesh.creation.icosphere(5, 0.1)
+    inner = trimesh.creation.icosphere(5, 0.09)
+    inner.invert()
+    shell = trimesh.util.concatenate([outer, inner])
+    points = np.array([[0.0, 0.0, 0.0], [0.05, 0.0, 0.0], [0.0, 0.2, 0.0]])
+    expected = np.array([0.09, 0.04, 0.1])
+    # the icospheres' flat faces lie inside their spheres by at most the sagitta (0.1 mm at 5 subdivisions)
+    assert np.allclose(surface_distance(shell, points), expected, atol=2e-4)

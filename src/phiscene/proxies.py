@@ -30,7 +30,7 @@ from phiscene.params import Params
 log = logging.getLogger(__name__)
 
 #: Bump when the decomposition code changes in a way that changes results.
-PROXY_VERSION = 9
+PROXY_VERSION = 10
 #: A hull vertex farther than this share of the mesh's bounding-box diagonal outside the mesh's convex hull makes
 #: :func:`fit_to_mesh` clip the hull (below it: floating-point noise of an exact decomposition, left alone).
 CLIP_TOLERANCE = 1e-4
@@ -249,13 +249,19 @@ def decimated_unit_free(mesh: trimesh.Trimesh, max_faces: int) -> trimesh.Trimes
 
 
 def decimation_loss(mesh: trimesh.Trimesh, reduced: trimesh.Trimesh, samples: int = 2048, seed: int = 0) -> float:
-    """Largest distance (m, unscaled) from a seeded sample of ``mesh``'s surface to ``reduced``'s surface."""
+    """Largest distance (m, unscaled) from a seeded sample of ``mesh``'s surface to ``reduced``'s surface.
+
+    Every face of ``reduced`` counts. Measured to the outer shell of ``reduced`` instead (as before PROXIES 8), the
+    voxel classification dropped faces of decimated reconstructions as inner walls: on the 61 `real` meshes the
+    loss read up to 5.5 % of the diagonal more, a chair's decimation was redone for it, and the 76 measurements took
+    8.5 s instead of 0.8 s.
+    """
     from phiscene.meshes import sample_surface
-    from phiscene.sdf import SignedDistance
+    from phiscene.sdf import surface_distance
 
     if reduced is mesh:
         return 0.0
-    return float(SignedDistance(reduced).unsigned(sample_surface(mesh, samples, seed)).max())
+    return float(surface_distance(reduced, sample_surface(mesh, samples, seed)).max())
 
 
 def decimated_faithfully(mesh: trimesh.Trimesh, max_faces: int, tolerance: float,

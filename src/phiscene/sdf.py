@@ -282,3 +282,26 @@ def signed_distance(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
         Exact distance to the nearest triangle, negated where the winding number exceeds ``TOL.winding_inside``.
     """
     return signed_distance_for(mesh)(points)
+
+
+def surface_distance(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
+    """Distance from points to the nearest triangle of ``mesh`` itself (libigl's AABB tree), (n, 3) -> (n,) float.
+
+    Unlike :meth:`SignedDistance.unsigned`, every face counts (no outer shell is taken) and no winding tree is
+    built: the distance to a surface as it is, such as a decimated copy's.
+    """
+    import igl
+
+    q = _check_points(points)
+    if len(q) == 0:
+        return np.zeros(0)
+    v = np.asarray(mesh.vertices, dtype=float)
+    origin = v.mean(axis=0) if len(v) else np.zeros(3)
+    v = np.ascontiguousarray(v - origin)
+    f = np.ascontiguousarray(np.asarray(mesh.faces, dtype=np.int64))
+    if len(f) == 0:
+        raise ValueError("surface distance needs a mesh with at least one triangle")
+    tree = igl.AABB()
+    tree.init(v, f)
+    d2, _, _ = tree.squared_distance(v, f, np.ascontiguousarray(q - origin))
+    return np.sqrt(np.maximum(np.asarray(d2, dtype=float), 0.0))
