@@ -290,18 +290,36 @@ def surface_distance(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
     Unlike :meth:`SignedDistance.unsigned`, every face counts (no outer shell is taken) and no winding tree is
     built: the distance to a surface as it is, such as a decimated copy's.
     """
-    import igl
-
     q = _check_points(points)
     if len(q) == 0:
         return np.zeros(0)
     v = np.asarray(mesh.vertices, dtype=float)
-    origin = v.mean(axis=0) if len(v) else np.zeros(3)
-    v = np.ascontiguousarray(v - origin)
+    d2, _ = nearest_on_surface(mesh, q, v.mean(axis=0) if len(v) else np.zeros(3))
+    return np.sqrt(np.maximum(d2, 0.0))
+
+
+def nearest_on_surface(mesh: trimesh.Trimesh, points: np.ndarray, origin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The nearest point of ``mesh``'s surface (every face) to each point, computed relative to ``origin``.
+
+    Parameters
+    ----------
+    points : (n, 3) float
+    origin : (3,) float
+        Subtracted from the mesh and the points first (cancellation far from the world origin).
+
+    Returns
+    -------
+    squared_distance : (n,) float
+    closest : (n, 3) float
+        Relative to ``origin``.
+    """
+    import igl
+
     f = np.ascontiguousarray(np.asarray(mesh.faces, dtype=np.int64))
     if len(f) == 0:
         raise ValueError("surface distance needs a mesh with at least one triangle")
+    v = np.ascontiguousarray(np.asarray(mesh.vertices, dtype=float) - origin)
     tree = igl.AABB()
     tree.init(v, f)
-    d2, _, _ = tree.squared_distance(v, f, np.ascontiguousarray(q - origin))
-    return np.sqrt(np.maximum(np.asarray(d2, dtype=float), 0.0))
+    d2, _, closest = tree.squared_distance(v, f, np.ascontiguousarray(np.asarray(points, dtype=float) - origin))
+    return np.asarray(d2, dtype=float), np.asarray(closest, dtype=float)

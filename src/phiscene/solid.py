@@ -397,15 +397,11 @@ def drawn_in(surface: trimesh.Trimesh, mesh: trimesh.Trimesh, gap: float) -> tri
     trimesh.Trimesh
         The same faces; vertices (v, 3) moved.
     """
-    import igl
+    from phiscene.sdf import nearest_on_surface
 
     v = np.asarray(surface.vertices, dtype=float)
     origin = v.mean(axis=0)
-    tree = igl.AABB()
-    mv = np.ascontiguousarray(np.asarray(mesh.vertices, dtype=float) - origin)
-    mf = np.ascontiguousarray(np.asarray(mesh.faces, dtype=np.int64))
-    tree.init(mv, mf)
-    _, _, closest = tree.squared_distance(mv, mf, np.ascontiguousarray(v - origin))
+    _, closest = nearest_on_surface(mesh, v, origin)
     away = v - origin - closest
     length = np.linalg.norm(away, axis=1, keepdims=True)
     moved = np.where(length > 0, closest + gap * away / np.where(length > 0, length, 1.0), v - origin)
